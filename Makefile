@@ -1,0 +1,54 @@
+# RIVET — the user's entry points. `make help` lists them.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+DOMAIN ?= cubes
+PY := .venv/bin/python
+UV ?= $(shell command -v uv 2>/dev/null || echo .venv-uv/bin/uv)
+export MUJOCO_GL ?= egl
+export PYOPENGL_PLATFORM ?= egl
+export MENAGERIE_ROOT ?= $(abspath ../shared/menagerie)
+
+.PHONY: help venv system test lint author eval bench sandbox-base sandbox-image format
+
+help: ## list the targets
+	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN{FS=":.*## "}{printf "  make %-14s %s\n", $$1, $$2}'
+
+$(UV):
+	python3 -m venv .venv-uv && .venv-uv/bin/pip install -q uv
+
+.venv/.synced: pyproject.toml uv.lock | $(UV)
+	$(UV) sync --frozen --all-extras
+	@touch $@
+
+venv: .venv/.synced ## create .venv from the lock file (uv)
+
+system: ## install and start the system pieces (Docker engine, EGL/Mesa) when missing
+	@bash scripts/bootstrap-system.sh
+
+test: venv system sandbox-image ## run the whole test suite (unit, property, sandbox, simulator)
+	$(PY) -m pytest
+
+lint: venv ## ruff (lint + format check) and mypy
+	.venv/bin/ruff check .
+	.venv/bin/ruff format --check .
+	.venv/bin/mypy contracts sandbox agent toolbox domains sim artifacts rivet
+
+format: venv ## apply ruff's formatting and safe fixes
+	.venv/bin/ruff format .
+	.venv/bin/ruff check --fix .
+
+author: venv system sandbox-image ## author DOMAIN's programs (offline replay by default)
+	.venv/bin/rivet author $(DOMAIN)
+
+eval: venv ## evaluate DOMAIN's frozen artifacts on the benchmark set
+	.venv/bin/rivet eval $(DOMAIN) --policy artifacts
+
+bench: venv system sandbox-image ## benchmarks: sandbox overhead, rendering, trial throughput
+	$(PY) -m benchmarks.run
+
+sandbox-base: ## build the offline sandbox base image (debootstrap + docker import)
+	@bash sandbox/build_base.sh
+
+sandbox-image: venv system ## build the sandbox image (tag = hash of its inputs) if missing
+	$(PY) -m sandbox.image build

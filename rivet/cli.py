@@ -1,0 +1,69 @@
+"""`rivet`: the user's command line.
+
+Each command group lives in `rivet/commands/<name>.py` and exposes
+`register(subparsers) -> None`; a registered handler returns an exit code.
+Exit codes: 0 success, 1 the work failed, 2 bad usage or bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from contracts.errors import RivetError, UsageError
+
+# Command modules, in the order `rivet --help` lists them.
+COMMAND_MODULES = (
+    "author",
+    "solve",
+    "eval",
+    "scene",
+    "sandbox",
+    "check",
+    "diff",
+    "validate",
+    "toolbox",
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # type: ignore[override]
+        self.print_usage(sys.stderr)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="rivet", description=__doc__.splitlines()[0] if __doc__ else None)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f"rivet.commands.{name}")
+        except ModuleNotFoundError as e:
+            if e.name == f"rivet.commands.{name}":
+                continue  # command not built yet
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args) or 0)
+    except UsageError as e:
+        print(f"rivet {args.command}: {e}", file=sys.stderr)
+        return 2
+    except RivetError as e:
+        print(f"rivet {args.command}: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Command groups of the rivet CLI; each module exposes `register(subparsers)`."""
