@@ -57,7 +57,7 @@ def cameras(draw) -> Camera:
     w, h = draw(st.integers(16, 4096)), draw(st.integers(16, 4096))
     fx, fy = draw(st.floats(10, 5000)), draw(st.floats(10, 5000))
     K = [[fx, 0.0, draw(st.floats(0, w))], [0.0, fy, draw(st.floats(0, h))], [0.0, 0.0, 1.0]]
-    return Camera(width=w, height=h, K=K, T_world_camera=draw(poses()))
+    return Camera(width=w, height=h, K=np.array(K), T_world_camera=draw(poses()))
 
 
 @st.composite
@@ -81,7 +81,9 @@ def instances(draw) -> Instance:
     start = draw(scenes())
     goal = SceneSpec(
         domain=start.domain,
-        objects=tuple(ObjectRecord(id=o.id, mesh=o.mesh, pose=draw(poses())) for o in start.objects),
+        objects=tuple(
+            ObjectRecord(id=o.id, mesh=o.mesh, pose=draw(poses())) for o in start.objects
+        ),
     )
     names = [o.id for o in start.objects]
     order = None
@@ -115,7 +117,8 @@ def relation_graphs(draw) -> RelationGraph:
         for key, (s, t, ty) in enumerate(
             draw(
                 st.lists(
-                    st.tuples(st.sampled_from(nodes), st.sampled_from(nodes), edge_types), max_size=10
+                    st.tuples(st.sampled_from(nodes), st.sampled_from(nodes), edge_types),
+                    max_size=10,
                 )
             )
         ):

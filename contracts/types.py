@@ -68,7 +68,9 @@ class Camera(_Value):
     @classmethod
     def from_dict(cls, data: Any) -> Camera:
         d = validate(cls.KIND, data)
-        return cls(width=d["width"], height=d["height"], K=d["K"], T_world_camera=d["T_world_camera"])
+        return cls(
+            width=d["width"], height=d["height"], K=d["K"], T_world_camera=d["T_world_camera"]
+        )
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -233,7 +235,9 @@ def plan_from_dict(data: Any) -> Plan:
     d = validate("plan", data)
     if d["status"] == "ok":
         return OkPlan(
-            steps=tuple(PlanStep(object=s["object"], target_pose=s["target_pose"]) for s in d["steps"])
+            steps=tuple(
+                PlanStep(object=s["object"], target_pose=s["target_pose"]) for s in d["steps"]
+            )
         )
     return InfeasiblePlan(reason=d["reason"])
 
@@ -284,8 +288,18 @@ class RelationGraph(_Value):
         d = validate(cls.KIND, data)
         edges = []
         for e in d["edges"]:
-            attrs = tuple(sorted((k, v) for k, v in e.items() if k not in ("source", "target", "type", "key")))
-            edges.append(Edge(source=e["source"], target=e["target"], type=e["type"], key=e.get("key"), attrs=attrs))
+            attrs = tuple(
+                sorted((k, v) for k, v in e.items() if k not in ("source", "target", "type", "key"))
+            )
+            edges.append(
+                Edge(
+                    source=e["source"],
+                    target=e["target"],
+                    type=e["type"],
+                    key=e.get("key"),
+                    attrs=attrs,
+                )
+            )
         return cls(
             nodes=tuple(n["id"] for n in d["nodes"]),
             edges=tuple(edges),
@@ -323,6 +337,9 @@ class State(_Value):
     def from_dict(cls, data: Any) -> State:
         if not isinstance(data, dict) or set(data) != {"objects", "relations"}:
             raise ContractError("", "a state is {'objects': records, 'relations': graph}")
-        state = cls(objects=records_from_list(data["objects"]), relations=RelationGraph.from_dict(data["relations"]))
+        state = cls(
+            objects=records_from_list(data["objects"]),
+            relations=RelationGraph.from_dict(data["relations"]),
+        )
         state.validate()
         return state

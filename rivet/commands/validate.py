@@ -35,6 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="check a JSON file against a contract (exit 0 valid, 2 invalid)",
         description=__doc__,
     )
-    p.add_argument("kind", choices=SCHEMA_NAMES, metavar="KIND", help=f"one of: {', '.join(SCHEMA_NAMES)}")
+    p.add_argument(
+        "kind", choices=SCHEMA_NAMES, metavar="KIND", help=f"one of: {', '.join(SCHEMA_NAMES)}"
+    )
     p.add_argument("file", type=Path, metavar="FILE.json")
     p.set_defaults(handler=run)

@@ -33,7 +33,13 @@ def test_valid_scene_exits_0(tmp_path):
 def test_improper_rotation_exits_2_naming_the_path(tmp_path):
     bad = [row[:] for row in POSE]
     bad[2][2] = -1
-    scene = {"domain": "cubes", "objects": [{"id": "red", "mesh": "cube", "pose": POSE}, {"id": "b", "mesh": "cube", "pose": bad}]}
+    scene = {
+        "domain": "cubes",
+        "objects": [
+            {"id": "red", "mesh": "cube", "pose": POSE},
+            {"id": "b", "mesh": "cube", "pose": bad},
+        ],
+    }
     out = rivet("validate", "scene", str(write(tmp_path, scene)))
     assert out.returncode == 2
     assert "objects[1].pose: rotation is not proper (det = -1.000)" in out.stderr

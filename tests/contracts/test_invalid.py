@@ -114,7 +114,11 @@ def test_mutations_are_rejected_with_their_path(kind):
             lists = [
                 p
                 for p, v in nodes
-                if isinstance(v, list) and v and isinstance(v[0], dict) and "id" in v[0] and "pose" in v[0]
+                if isinstance(v, list)
+                and v
+                and isinstance(v[0], dict)
+                and "id" in v[0]
+                and "pose" in v[0]
             ]
             assume(lists)
             path = data.draw(st.sampled_from(lists))
@@ -148,23 +152,49 @@ def test_mutations_are_rejected_with_their_path(kind):
     [
         (
             "scene",
-            {"domain": "cubes", "objects": [{"id": "a", "mesh": "m", "pose": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}] * 2},
+            {
+                "domain": "cubes",
+                "objects": [
+                    {
+                        "id": "a",
+                        "mesh": "m",
+                        "pose": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
+                    }
+                ]
+                * 2,
+            },
             "scene: objects[1].id: duplicate id 'a' (also at index 0)",
         ),
         (
             "records",
-            [{"id": "a", "mesh": "m", "pose": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]}],
+            [
+                {
+                    "id": "a",
+                    "mesh": "m",
+                    "pose": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]],
+                }
+            ],
             "records: [0].pose: rotation is not proper (det = -1.000)",
         ),
         ("plan", {"status": "maybe"}, "plan: status: 'maybe' is not one of ['ok', 'infeasible']"),
         (
             "relations",
-            {"directed": True, "multigraph": True, "nodes": [{"id": "a"}], "edges": [{"source": "a", "target": "b", "type": "on"}]},
+            {
+                "directed": True,
+                "multigraph": True,
+                "nodes": [{"id": "a"}],
+                "edges": [{"source": "a", "target": "b", "type": "on"}],
+            },
             "relations: edges[0].target: edge to unknown node 'b'",
         ),
         (
             "camera",
-            {"width": 640, "height": 480, "K": [[-1, 0, 320], [0, 500, 240], [0, 0, 1]], "T_world_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+            {
+                "width": 640,
+                "height": 480,
+                "K": [[-1, 0, 320], [0, 500, 240], [0, 0, 1]],
+                "T_world_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
+            },
             "camera: K: focal lengths must be positive, got fx=-1.0, fy=500.0",
         ),
         ("camera", [], "camera: (root): [] is not of type 'object'"),
@@ -188,5 +218,7 @@ def test_instance_start_and_goal_must_hold_the_same_objects():
 
 
 def test_unknown_kind_lists_the_choices():
-    with pytest.raises(ContractError, match="unknown contract 'scenes'; known: camera, observation"):
+    with pytest.raises(
+        ContractError, match="unknown contract 'scenes'; known: camera, observation"
+    ):
         validate("scenes", {})

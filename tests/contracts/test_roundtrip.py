@@ -40,7 +40,9 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize(("kind", "strategy", "from_dict", "to_dict"), CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(
+    ("kind", "strategy", "from_dict", "to_dict"), CASES, ids=[c[0] for c in CASES]
+)
 def test_roundtrip(kind, strategy, from_dict, to_dict):
     @EXAMPLES
     @given(strategy)
@@ -90,5 +92,7 @@ def test_state_validates_node_ids_against_records(data):
     recs = data.draw(cst.records(min_size=1))
     graph = RelationGraph(nodes=tuple(r.id for r in recs))
     State(objects=recs, relations=graph).validate()
-    state = State.from_dict(_through_json({"objects": records_to_list(recs), "relations": graph.to_dict()}))
+    state = State.from_dict(
+        _through_json({"objects": records_to_list(recs), "relations": graph.to_dict()})
+    )
     assert state.objects == recs

@@ -59,7 +59,9 @@ def test_rot_z_yaw_round_trip(angle):
 def test_rotvec_matches_angle(w):
     R = se3.rotvec_to_matrix(w)
     assert se3.is_proper_rotation(R)
-    assert se3.rotation_angle(R) == pytest.approx(min(np.linalg.norm(w), 2 * np.pi - np.linalg.norm(w)), abs=1e-6)
+    assert se3.rotation_angle(R) == pytest.approx(
+        min(np.linalg.norm(w), 2 * np.pi - np.linalg.norm(w)), abs=1e-6
+    )
 
 
 def test_cube_group_has_24_distinct_proper_rotations():
@@ -87,5 +89,9 @@ def test_error_measures_a_known_offset(T, d, angle):
     moved = se3.compose(offset, T)  # world-frame rotation about T's position's parallel axis
     t_err, r_err = se3.pose_error(T, moved)
     assert r_err == pytest.approx(angle, abs=1e-6)
-    assert t_err == pytest.approx(np.linalg.norm(offset[:3, :3] @ T[:3, 3] + offset[:3, 3] - T[:3, 3]), abs=1e-9)
-    assert not se3.within_tolerance(T, moved, trans_tol=t_err / 2 if t_err > 0 else -1, rot_tol=None)
+    assert t_err == pytest.approx(
+        np.linalg.norm(offset[:3, :3] @ T[:3, 3] + offset[:3, 3] - T[:3, 3]), abs=1e-9
+    )
+    assert not se3.within_tolerance(
+        T, moved, trans_tol=t_err / 2 if t_err > 0 else -1, rot_tol=None
+    )
