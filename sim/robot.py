@@ -1,0 +1,281 @@
+"""The robot: a Franka Research 3 arm with a Robotiq 2F-85 gripper, from MuJoCo Menagerie.
+
+Design rule: every name and number the rest of `sim` needs about the robot lives here (joint,
+actuator, site and geom names, the park posture, the gripper's opening table), so the executor
+and the IK never spell a menagerie name themselves. The models are read through
+`mujoco_menagerie` (offline: `MENAGERIE_ROOT`); nothing is copied into this repository.
+
+The robot's frames: the arm's base sits at the world origin; the TCP site `robot/tcp` lies
+between the finger pads, its z axis pointing out of the gripper (the approach direction) and its
+y axis along the jaws' closing direction (the gripper's own frame).
+"""
+
+from __future__ import annotations
+
+import functools
+import pathlib
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim._exec_errors import RobotModelError
+
+PREFIX = "robot/"
+"""Prefix of every element the robot adds to a scene."""
+
+ARM_JOINTS: tuple[str, ...] = tuple(f"{PREFIX}fr3_joint{i}" for i in range(1, 8))
+ARM_ACTUATORS: tuple[str, ...] = ARM_JOINTS  # the menagerie names actuators after joints
+GRIPPER_ACTUATOR = f"{PREFIX}gripper/fingers_actuator"
+GRIPPER_BASE_BODY = f"{PREFIX}gripper/base"
+GRIPPER_DRIVER_JOINTS = (
+    f"{PREFIX}gripper/left_driver_joint",
+    f"{PREFIX}gripper/right_driver_joint",
+)
+LEFT_PAD_GEOMS = (f"{PREFIX}gripper/left_pad1", f"{PREFIX}gripper/left_pad2")
+RIGHT_PAD_GEOMS = (f"{PREFIX}gripper/right_pad1", f"{PREFIX}gripper/right_pad2")
+TCP_SITE = f"{PREFIX}tcp"
+PARK_KEY = f"{PREFIX}park"
+WELD_ASSIST = f"{PREFIX}weld_assist"
+"""An inactive weld from the gripper base to the world; the executor retargets it to a held
+object while the weld assist is on (see docs/executor.md)."""
+
+TCP_OFFSET = 0.145
+"""TCP position along the gripper's z axis from its base [m]: the pads' centre when closed."""
+
+PARK_QPOS = np.array([0.0, -0.6, 0.0, -0.5, 0.0, 3.9, 0.785])
+"""Arm posture for observations [rad]: upright and leaning back, wrist folded behind the base,
+so that cameras in front of the table (x ≈ 1.0–1.3 m, elevated) do not see the arm over the
+workspace."""
+
+READY_QPOS = np.array([0.0, -0.2, 0.0, -2.3, 0.0, 2.1, 0.785])
+"""Arm posture above the workspace with the gripper pointing down [rad]; the IK's posture
+target and the first waypoint out of the park posture."""
+
+ARM_VELOCITY_LIMITS = np.array([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
+"""FR3 joint speed limits [rad/s] (Franka's datasheet)."""
+
+GRIPPER_OPEN = 0.0
+GRIPPER_CLOSED = 255.0
+"""The 2F-85's control range: 0 fully open (85 mm), 255 fully closed."""
+
+_INTEGRATOR = mujoco.mjtIntegrator.mjINT_IMPLICITFAST  # what the menagerie FR3 scene uses
+
+
+def _load_spec(robot: str, entry: str) -> mujoco.MjSpec:
+    import mujoco_menagerie
+
+    try:
+        spec = mujoco_menagerie.get(robot).spec(entry)
+    except Exception as exc:
+        raise RobotModelError(
+            f"cannot load menagerie model {robot}/{entry}: {exc}. Offline, point "
+            "MENAGERIE_ROOT at a folder holding franka_fr3/ and robotiq_2f85/ "
+            "(e.g. export MENAGERIE_ROOT=../shared/menagerie)"
+        ) from exc
+    return spec
+
+
+def _absolute_meshdir(spec: mujoco.MjSpec) -> None:
+    """Make the spec's meshdir absolute (MjSpec.attach resolves it against the parent).
+
+    A model file that leaves meshdir empty keeps its meshes in ``assets/`` in the menagerie
+    layout; that folder is used when the mesh files are not beside the model file.
+    """
+    root = pathlib.Path(spec.modelfiledir)
+    candidates = [root / spec.meshdir] if spec.meshdir else [root, root / "assets"]
+    first = next(iter(spec.meshes), None)
+    for folder in candidates:
+        if first is None or (folder / first.file).is_file():
+            spec.meshdir = str(folder.resolve())
+            return
+    raise RobotModelError(f"cannot find mesh {first.file!r} under {[str(c) for c in candidates]}")
+
+
+def _arm_with_gripper() -> mujoco.MjSpec:
+    arm = _load_spec("franka_fr3", "fr3")
+    gripper = _load_spec("robotiq_2f85", "2f85")
+    _absolute_meshdir(arm)
+    _absolute_meshdir(gripper)
+    # The 2F-85's joint ranges are authored in radians (its file says so); a copy whose
+    # <compiler angle="radian"/> line is missing would read them as degrees.
+    gripper.compiler.degree = False
+    # Attaching keeps the parent's options; give the arm the gripper's so nothing conflicts.
+    arm.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    arm.option.impratio = 10.0
+    for key in list(arm.keys):
+        arm.delete(key)  # the arm's "home" key knows no gripper joints; we add our own
+    arm.attach(gripper, prefix="gripper/", site=arm.site("attachment_site"))
+    arm.body("gripper/base").add_site(
+        name="tcp",
+        pos=[0.0, 0.0, TCP_OFFSET],
+        size=[0.004, 0.0, 0.0],
+        rgba=[1.0, 0.3, 0.1, 1.0],
+        group=5,
+    )
+    n_gripper_q = 8
+    arm.add_key(
+        name="park",
+        qpos=[*PARK_QPOS, *([0.0] * n_gripper_q)],
+        ctrl=[*PARK_QPOS, GRIPPER_OPEN],
+    )
+    return arm
+
+
+def attach_robot(spec: mujoco.MjSpec) -> None:
+    """Add the FR3 + 2F-85 at the world origin of `spec`, in place.
+
+    Also sets the options that attaching drops (elliptic friction cones, impratio 10, the
+    implicitfast integrator), gravity compensation on the robot's bodies (the FR3 compensates
+    gravity in its own controller), a keyframe `robot/park`, the TCP site and the inactive weld
+    the executor's optional weld assist uses. Every added name starts with `PREFIX`.
+    """
+    arm = _arm_with_gripper()
+    spec.option.integrator = _INTEGRATOR
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.impratio = 10.0
+    spec.attach(arm, prefix=PREFIX, frame=spec.worldbody.add_frame(pos=[0.0, 0.0, 0.0]))
+    for body in spec.bodies:
+        if body.name.startswith(PREFIX):
+            body.gravcomp = 1.0
+    spec.add_equality(
+        name=WELD_ASSIST,
+        type=mujoco.mjtEq.mjEQ_WELD,
+        objtype=mujoco.mjtObj.mjOBJ_BODY,
+        name1=GRIPPER_BASE_BODY,
+        active=False,
+        solref=[0.01, 1.0],
+    )
+
+
+def build_robot_spec() -> mujoco.MjSpec:
+    """A spec holding only the robot (no floor): the IK's kinematic model."""
+    spec = mujoco.MjSpec()
+    spec.modelname = "rivet_robot"
+    attach_robot(spec)
+    return spec
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotIndex:
+    """Indices of the robot's elements in a compiled model."""
+
+    arm_qpos: np.ndarray  # (7,) qpos addresses of the arm joints
+    arm_dof: np.ndarray  # (7,) dof addresses of the arm joints
+    arm_actuators: np.ndarray  # (7,)
+    arm_range: np.ndarray  # (7, 2) joint limits [rad]
+    gripper_actuator: int
+    driver_qpos: np.ndarray  # (2,) qpos addresses of the 2F-85's driver joints
+    tcp_site: int
+    gripper_base: int  # body id
+    left_pads: frozenset[int]  # geom ids
+    right_pads: frozenset[int]
+    robot_bodies: frozenset[int]
+    weld: int  # equality id of the weld assist, -1 when the model has none
+
+    @classmethod
+    def from_model(cls, model: mujoco.MjModel) -> RobotIndex:
+        """Look the robot up in `model`; raises RobotModelError when it is not there."""
+
+        def find(kind: mujoco.mjtObj, name: str) -> int:
+            i = mujoco.mj_name2id(model, kind, name)
+            if i < 0:
+                raise RobotModelError(
+                    f"the model has no {kind.name.removeprefix('mjOBJ_').lower()} {name!r}; "
+                    "was the scene built with sim.robot.attach_robot?"
+                )
+            return i
+
+        joints = [find(mujoco.mjtObj.mjOBJ_JOINT, n) for n in ARM_JOINTS]
+        drivers = [find(mujoco.mjtObj.mjOBJ_JOINT, n) for n in GRIPPER_DRIVER_JOINTS]
+        return cls(
+            arm_qpos=model.jnt_qposadr[joints].copy(),
+            arm_dof=model.jnt_dofadr[joints].copy(),
+            arm_actuators=np.array([find(mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ARM_ACTUATORS]),
+            arm_range=model.jnt_range[joints].copy(),
+            gripper_actuator=find(mujoco.mjtObj.mjOBJ_ACTUATOR, GRIPPER_ACTUATOR),
+            driver_qpos=model.jnt_qposadr[drivers].copy(),
+            tcp_site=find(mujoco.mjtObj.mjOBJ_SITE, TCP_SITE),
+            gripper_base=find(mujoco.mjtObj.mjOBJ_BODY, GRIPPER_BASE_BODY),
+            left_pads=frozenset(find(mujoco.mjtObj.mjOBJ_GEOM, n) for n in LEFT_PAD_GEOMS),
+            right_pads=frozenset(find(mujoco.mjtObj.mjOBJ_GEOM, n) for n in RIGHT_PAD_GEOMS),
+            robot_bodies=frozenset(
+                b for b in range(model.nbody) if model.body(b).name.startswith(PREFIX)
+            ),
+            weld=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, WELD_ASSIST),
+        )
+
+
+def park(model: mujoco.MjModel, data: mujoco.MjData) -> None:
+    """Put the arm in its park posture with the gripper open (robot joints only), at rest."""
+    index = RobotIndex.from_model(model)
+    key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, PARK_KEY)
+    robot_joints = [j for j in range(model.njnt) if model.joint(j).name.startswith(PREFIX)]
+    for j in robot_joints:
+        adr, dof = model.jnt_qposadr[j], model.jnt_dofadr[j]
+        data.qpos[adr] = model.key_qpos[key, adr] if key >= 0 else 0.0
+        data.qvel[dof] = 0.0
+    data.qpos[index.arm_qpos] = PARK_QPOS
+    data.ctrl[index.arm_actuators] = PARK_QPOS
+    data.ctrl[index.gripper_actuator] = GRIPPER_OPEN
+    mujoco.mj_forward(model, data)
+
+
+def tcp_pose(data: mujoco.MjData, index: RobotIndex) -> np.ndarray:
+    """World pose (4, 4) of the TCP site."""
+    T = np.eye(4)
+    T[:3, :3] = data.site_xmat[index.tcp_site].reshape(3, 3)
+    T[:3, 3] = data.site_xpos[index.tcp_site]
+    return T
+
+
+@dataclass(frozen=True, kw_only=True)
+class GripperTable:
+    """How the 2F-85's jaws move with its control, measured once in simulation.
+
+    The pads travel on an arc: closing moves them towards the fingertips' direction, so the
+    fingertip's depth along the TCP's z axis depends on the opening.
+    """
+
+    ctrl: np.ndarray  # (n,) increasing control values
+    gap: np.ndarray  # (n,) distance between the pads' inner faces [m], decreasing
+    tip: np.ndarray  # (n,) fingertip depth along the TCP z axis, from the TCP [m]
+
+    pad_height: float = 0.0375  # contact height of a pad, from its tip towards the palm [m]
+    pad_width: float = 0.022  # pad width across the closing direction [m]
+    max_gap: float = 0.085
+
+    def ctrl_for_gap(self, gap: float) -> float:
+        """Control value that opens the jaws to `gap` [m] (clipped to the stroke)."""
+        return float(np.interp(gap, self.gap[::-1], self.ctrl[::-1]))
+
+    def tip_at_gap(self, gap: float) -> float:
+        """Fingertip depth along the TCP z axis [m] when the jaws are `gap` [m] apart."""
+        return float(np.interp(gap, self.gap[::-1], self.tip[::-1]))
+
+
+@functools.cache
+def gripper_table() -> GripperTable:
+    """Measure the 2F-85's stroke: pad gap and fingertip depth over its control range."""
+    gripper = _load_spec("robotiq_2f85", "2f85")
+    _absolute_meshdir(gripper)
+    gripper.compiler.degree = False
+    gripper.option.gravity = [0.0, 0.0, 0.0]
+    gripper.option.integrator = _INTEGRATOR
+    model = gripper.compile()
+    data = mujoco.MjData(model)
+    base = model.body("base").id
+    pads = [model.geom(n).id for n in ("left_pad1", "right_pad1")]
+    ctrls = np.linspace(GRIPPER_OPEN, GRIPPER_CLOSED, 18)
+    gaps, tips = [], []
+    for c in ctrls:
+        data.ctrl[0] = c
+        for _ in range(400):
+            mujoco.mj_step(model, data)
+        R, p = data.xmat[base].reshape(3, 3), data.xpos[base]
+        centres = [(data.geom_xpos[g] - p) @ R for g in pads]  # in the gripper base frame
+        half_thickness = model.geom_size[pads[0], 1]
+        half_height = model.geom_size[pads[0], 2]
+        gaps.append(abs(centres[1][1] - centres[0][1]) - 2 * half_thickness)
+        tips.append(0.5 * (centres[0][2] + centres[1][2]) + half_height - TCP_OFFSET)
+    return GripperTable(ctrl=ctrls, gap=np.maximum(np.array(gaps), 0.0), tip=np.array(tips))
