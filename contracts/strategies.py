@@ -95,7 +95,7 @@ def instances(draw) -> Instance:
         goal=goal,
         name=draw(st.none() | ids),
         seed=draw(st.none() | st.integers(0, 2**31)),
-        construction_order=order,
+        order=order,
     )
 
 

@@ -175,7 +175,7 @@ class Instance(_Value):
     goal: SceneSpec
     name: str | None = None
     seed: int | None = None
-    construction_order: tuple[PlanStep, ...] | None = None
+    order: tuple[PlanStep, ...] | None = None  # a valid construction order (an ok plan)
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"domain": self.domain}
@@ -185,21 +185,21 @@ class Instance(_Value):
             d["seed"] = int(self.seed)
         d["start"] = self.start.to_dict()
         d["goal"] = self.goal.to_dict()
-        if self.construction_order is not None:
-            d["construction_order"] = [s.to_dict() for s in self.construction_order]
+        if self.order is not None:
+            d["order"] = {"status": "ok", "steps": [s.to_dict() for s in self.order]}
         return d
 
     @classmethod
     def from_dict(cls, data: Any) -> Instance:
         d = validate(cls.KIND, data)
-        order = d.get("construction_order")
+        order = (d.get("order") or {}).get("steps")
         return cls(
             domain=d["domain"],
             name=d.get("name"),
             seed=d.get("seed"),
             start=SceneSpec.from_dict(d["start"]),
             goal=SceneSpec.from_dict(d["goal"]),
-            construction_order=None
+            order=None
             if order is None
             else tuple(PlanStep(object=s["object"], target_pose=s["target_pose"]) for s in order),
         )

@@ -188,8 +188,8 @@ def _instance(data: dict, path: Path, kind: str) -> None:
     for i, obj in enumerate(data["start"]["objects"]):
         if obj["id"] not in goal:
             _fail((*path, "start", "objects", i, "id"), f"'{obj['id']}' is not in goal", kind)
-    for i, step in enumerate(data.get("construction_order", [])):
-        _step(step, (*path, "construction_order", i), start, kind)
+    for i, step in enumerate((data.get("order") or {}).get("steps", [])):
+        _step(step, (*path, "order", "steps", i), start, kind)
 
 
 def _step(step: dict, path: Path, known: dict[str, Any] | None, kind: str) -> None:

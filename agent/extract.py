@@ -1,0 +1,64 @@
+"""Take the draft out of a model response: exactly one ```python block defining the function.
+
+A malformed response is the model's mistake, not the run's: it becomes a check report of
+category `interface` that goes back to the model like any other failure.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+
+_FENCE = re.compile(r"^```(?P<lang>[A-Za-z0-9_+-]*)[ \t]*\n(?P<body>.*?)^```[ \t]*$", re.M | re.S)
+
+
+class DraftFormatError(Exception):
+    """The response holds no usable draft; the message is written for the model."""
+
+
+def extract_draft(text: str, function: str) -> str:
+    """The source of the single Python code block in `text`, which must define `function`."""
+    blocks = [m for m in _FENCE.finditer(text) if m.group("lang").lower() in ("python", "py", "")]
+    if not blocks:
+        raise DraftFormatError(
+            "your answer holds no ```python code block; answer with exactly one block holding "
+            f"the whole module that defines `{function}`"
+        )
+    if len(blocks) > 1:
+        raise DraftFormatError(
+            f"your answer holds {len(blocks)} code blocks; answer with exactly one block holding "
+            f"the whole module that defines `{function}`"
+        )
+    source = blocks[0].group("body")
+    try:
+        tree = ast.parse(source)
+    except SyntaxError as e:
+        raise DraftFormatError(
+            f"the code block is not valid Python: line {e.lineno}: {e.msg}"
+        ) from None
+    defined = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+    if function not in defined:
+        names = ", ".join(sorted(defined)) or "none"
+        raise DraftFormatError(
+            f"the module must define a top-level function `{function}`; it defines: {names}"
+        )
+    return source if source.endswith("\n") else source + "\n"
+
+
+def format_error_report(domain: str, function: str, error: DraftFormatError) -> dict:
+    """A check report (contracts/schemas/check_report.schema.json) for a malformed response."""
+    return {
+        "schema_version": 1,
+        "domain": domain,
+        "function": function,
+        "passed": False,
+        "first_failure": "response_format",
+        "checks": [
+            {
+                "name": "response_format",
+                "category": "interface",
+                "status": "failed",
+                "message": str(error),
+            }
+        ],
+    }

@@ -1,0 +1,198 @@
+"""The authoring loop: for each function in DAG order → prompt → model → draft → checks →
+feedback → repair … → freeze.
+
+Every attempt re-runs all checks; the best draft so far is kept; exhaustion raises
+`AuthoringExhausted` with a state that `--resume` continues from (journal.py).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from agent import dag
+from agent.clients.base import ImageBlock, ModelClient
+from agent.errors import AuthoringExhausted
+from agent.extract import DraftFormatError, extract_draft, format_error_report
+from agent.journal import Journal
+from agent.prompt import DomainContext, Feedback, build_request
+
+
+class Checker(Protocol):
+    """Runs a draft's full check suite; returns a check report (check_report.schema.json)."""
+
+    def check(
+        self, domain: str, function: str, source: str, *, deps: dict[str, str], out_dir: Path
+    ) -> dict: ...
+
+    def markdown(self, report: dict) -> str: ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class Attempt:
+    function: str
+    attempt: int
+    passed: bool
+    report: dict
+    source: str | None
+
+
+Progress = Callable[[str], None]
+
+
+def _stderr_progress(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _score(report: dict) -> tuple[int, int]:
+    checks = report.get("checks", [])
+    return (sum(c["status"] == "passed" for c in checks), -len(checks))
+
+
+class AuthoringRun:
+    def __init__(
+        self,
+        *,
+        ctx: DomainContext,
+        client: ModelClient,
+        checker: Checker,
+        journal: Journal,
+        max_attempts: int = 4,
+        progress: Progress = _stderr_progress,
+    ) -> None:
+        self.ctx = ctx
+        self.client = client
+        self.checker = checker
+        self.journal = journal
+        self.max_attempts = max_attempts
+        self.progress = progress
+        self.history: list[Attempt] = []
+        self._t0 = time.monotonic()
+
+    def run(self) -> dict[str, str]:
+        """Author every function not yet frozen in this run; return the frozen sources."""
+        state = self.journal.state()
+        frozen = dict(state.frozen)
+        if not self.journal.events():
+            self.journal.event(
+                "started", config={"domain": self.ctx.domain, "max_attempts": self.max_attempts}
+            )
+        for function in dag.authoring_order():
+            if function in frozen:
+                self.progress(f"[{function}] frozen earlier in this run")
+                continue
+            frozen[function] = self._author(function, frozen)
+        self.journal.event("finished")
+        return frozen
+
+    def _say(self, function: str, attempt: int, what: str) -> None:
+        st = self.journal.state()
+        self.progress(
+            f"[{function} {attempt}/{self.max_attempts}] {what}  "
+            f"(calls {st.calls}, in {st.usage.input_tokens + st.usage.cache_read_tokens + st.usage.cache_write_tokens} "
+            f"out {st.usage.output_tokens} tok, ${st.usage.usd:.2f}, {time.monotonic() - self._t0:.0f}s)"
+        )
+
+    def _author(self, function: str, frozen: dict[str, str]) -> str:
+        feedback: Feedback | None = None
+        best: Attempt | None = None
+        for attempt in range(1, self.max_attempts + 1):
+            request = build_request(
+                self.ctx,
+                function,
+                attempt,
+                frozen=frozen,
+                feedback=feedback,
+                max_attempts=self.max_attempts,
+            )
+            text = self.journal.saved_response(function, attempt)
+            if text is None:
+                self._say(function, attempt, "asking the model")
+                self.journal.event(
+                    "call", function=function, attempt=attempt, request_hash=request.hash
+                )
+                response = self.client.complete(request)
+                self.journal.save_response(function, attempt, response, request.hash)
+                text = response.text
+            source: str | None
+            try:
+                source = extract_draft(text, function)
+            except DraftFormatError as e:
+                source = None
+                report = format_error_report(self.ctx.domain, function, e)
+                markdown = f"**response_format** failed: {e}"
+                self.journal.save_report(function, attempt, report, markdown)
+            else:
+                self.journal.save_draft(function, attempt, source)
+                report = self.journal.saved_report(function, attempt)
+                if report is None:
+                    self._say(function, attempt, "checking the draft")
+                    deps = {d: frozen[d] for d in dag.CODE_DEPS[function]}
+                    report = self.checker.check(
+                        self.ctx.domain,
+                        function,
+                        source,
+                        deps=deps,
+                        out_dir=self.journal.images_dir(function, attempt),
+                    )
+                    markdown = self.checker.markdown(report)
+                    self.journal.save_report(function, attempt, report, markdown)
+                else:
+                    markdown = self.journal.saved_markdown(
+                        function, attempt
+                    ) or self.checker.markdown(report)
+            result = Attempt(
+                function=function,
+                attempt=attempt,
+                passed=bool(report["passed"]),
+                report=report,
+                source=source,
+            )
+            self.history.append(result)
+            if result.passed and source is not None:
+                self.journal.freeze(function, attempt, source)
+                self._say(function, attempt, f"passed {len(report['checks'])} checks: frozen")
+                return source
+            self._say(function, attempt, f"failed: {report.get('first_failure')}")
+            if best is None or _score(report) > _score(best.report):
+                best = result
+            feedback = Feedback(
+                draft=source if source is not None else text,
+                report_markdown=markdown,
+                images=_report_images(report, self.journal.images_dir(function, attempt)),
+            )
+        assert best is not None
+        if best.source is not None:
+            self.journal.save_draft(function, 0, best.source)  # drafts/<fn>-0.py: the best so far
+        self.journal.event(
+            "exhausted", function=function, attempts=self.max_attempts, best_attempt=best.attempt
+        )
+        raise AuthoringExhausted(
+            function,
+            self.max_attempts,
+            str(self.journal.dir),
+            f"best attempt: {best.attempt} (first failure: {best.report.get('first_failure')})",
+        )
+
+
+def _report_images(report: dict, images_dir: Path, limit: int = 4) -> tuple[ImageBlock, ...]:
+    out: list[ImageBlock] = []
+    for check in report.get("checks", []):
+        if check["status"] not in ("failed", "error"):
+            continue
+        for image in check.get("images", []):
+            path = Path(image["path"])
+            if not path.is_absolute():
+                path = images_dir / path
+            if path.is_file() and len(out) < limit:
+                out.append(
+                    ImageBlock(
+                        png=path.read_bytes(),
+                        caption=f"{check['name']}: {image.get('caption', path.name)}",
+                    )
+                )
+    return tuple(out)

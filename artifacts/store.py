@@ -1,0 +1,146 @@
+"""Freezing and verifying `artifacts/<domain>/`: four sources under stable names + manifest.
+
+Writes are atomic: the new set is written to a sibling temporary folder and swapped in with
+renames, so a crash leaves either the old set or the new one, never a mix.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from agent import dag
+from artifacts.errors import ArtifactError
+from artifacts.hashing import REPO, set_hash, sha256_bytes, sha256_text, tree_hash
+from contracts import ContractError, validate
+
+ROOT = REPO / "artifacts"
+
+
+def domain_dir(domain: str, root: Path | None = None) -> Path:
+    return (root or ROOT) / domain
+
+
+def build_manifest(
+    domain: str,
+    sources: dict[str, str],
+    *,
+    author: dict[str, Any],
+    prompt_hash: str | None = None,
+    attempts: dict[str, int] | None = None,
+    checks: dict[str, dict[str, int]] | None = None,
+) -> dict[str, Any]:
+    functions: dict[str, Any] = {}
+    for name in dag.FUNCTIONS:
+        if name not in sources:
+            raise ArtifactError(f"cannot freeze {domain}: '{name}' has no passing draft")
+        entry: dict[str, Any] = {
+            "file": f"{name}.py",
+            "sha256": sha256_text(sources[name]),
+            "depends_on": list(dag.dependencies(name)),
+        }
+        if attempts and name in attempts:
+            entry["attempts"] = attempts[name]
+        if checks and name in checks:
+            entry["checks"] = checks[name]
+        functions[name] = entry
+    manifest: dict[str, Any] = {
+        "schema_version": 1,
+        "domain": domain,
+        "set_hash": set_hash({n: e["sha256"] for n, e in functions.items()}),
+        "functions": functions,
+        "author": author,
+        "contracts_hash": tree_hash("contracts"),
+        "toolbox_hash": tree_hash("toolbox"),
+        "created_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+    if prompt_hash:
+        manifest["prompt_hash"] = prompt_hash
+    validate("manifest", manifest)
+    return manifest
+
+
+def freeze(
+    domain: str, sources: dict[str, str], manifest: dict[str, Any], root: Path | None = None
+) -> bool:
+    """Write the set atomically; return False (writing nothing) when the set hash is unchanged."""
+    target = domain_dir(domain, root)
+    current = target / "manifest.json"
+    if current.is_file():
+        try:
+            if json.loads(current.read_text()).get("set_hash") == manifest["set_hash"]:
+                return False
+        except json.JSONDecodeError:
+            pass
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{domain}.new-"))
+    try:
+        if target.is_dir():  # keep files that are not part of the set (eval.json, README, …)
+            for p in target.iterdir():
+                if p.is_file() and p.name not in {f"{n}.py" for n in dag.FUNCTIONS} | {
+                    "manifest.json"
+                }:
+                    shutil.copy2(p, tmp / p.name)
+        for name in dag.FUNCTIONS:
+            (tmp / f"{name}.py").write_text(sources[name], encoding="utf-8")
+        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+        for p in tmp.iterdir():
+            with open(p, "rb") as f:
+                os.fsync(f.fileno())
+        old = None
+        if target.exists():
+            old = target.with_name(f".{domain}.old-{os.getpid()}")
+            os.replace(target, old)
+        os.replace(tmp, target)
+        if old is not None:
+            shutil.rmtree(old)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return True
+
+
+def verify(domain: str, root: Path | None = None) -> tuple[dict[str, Any], dict[str, str]]:
+    """Check the manifest and every file's hash; return (manifest, sources). Raises ArtifactError."""
+    target = domain_dir(domain, root)
+    path = target / "manifest.json"
+    if not path.is_file():
+        raise ArtifactError(
+            f"no frozen artifacts for '{domain}': {path} is missing (run: make author DOMAIN={domain})"
+        )
+    try:
+        manifest = validate("manifest", json.loads(path.read_text()))
+    except (json.JSONDecodeError, ContractError) as e:
+        raise ArtifactError(f"{path}: invalid manifest: {e}") from None
+    if manifest["domain"] != domain:
+        raise ArtifactError(
+            f"{path}: manifest is for domain '{manifest['domain']}', not '{domain}'"
+        )
+    sources: dict[str, str] = {}
+    for name in dag.FUNCTIONS:
+        entry = manifest["functions"].get(name)
+        if entry is None:
+            raise ArtifactError(f"{path}: manifest lists no '{name}'")
+        file = target / entry["file"]
+        if not file.is_file():
+            raise ArtifactError(f"{file} is missing")
+        data = file.read_bytes()
+        digest = sha256_bytes(data)
+        if digest != entry["sha256"]:
+            raise ArtifactError(
+                f"{file}: sha256 {digest[:12]}… does not match the manifest's {entry['sha256'][:12]}…; "
+                "refusing to load a modified artifact"
+            )
+        try:
+            sources[name] = data.decode("utf-8")
+        except UnicodeDecodeError:
+            raise ArtifactError(f"{file} is not UTF-8 text") from None
+    expected = set_hash({n: e["sha256"] for n, e in manifest["functions"].items()})
+    if expected != manifest["set_hash"]:
+        raise ArtifactError(f"{path}: set_hash does not match the functions' hashes")
+    return manifest, sources
