@@ -145,7 +145,7 @@ def connected_components(mask: object, *, min_area: int = 1) -> list[np.ndarray]
     Returns a list of bool masks (H, W), largest first.
     """
     m = check_image(mask, None, "mask", ndim=2).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
     order = [i for i in np.argsort(-stats[:, cv2.CC_STAT_AREA], kind="stable") if i != 0]
     return [labels == i for i in order if stats[i, cv2.CC_STAT_AREA] >= min_area]
 
@@ -200,7 +200,7 @@ def _rgb(rgb: object) -> np.ndarray:
 def _hue_peaks(hue: np.ndarray, weight: np.ndarray, tolerance: float) -> np.ndarray:
     """Centres [deg] of the modes of a circular hue histogram, at least `tolerance` apart."""
     hist = np.bincount(hue.astype(int) % 360, weights=weight, minlength=360)
-    width = max(1, int(round(tolerance / 3)))
+    width = max(1, round(tolerance / 3))
     kernel = np.exp(-0.5 * (np.arange(-3 * width, 3 * width + 1) / width) ** 2)
     smooth = np.convolve(np.r_[hist[-3 * width :], hist, hist[: 3 * width]], kernel, "valid")
     floor = 0.02 * smooth.max()
