@@ -93,6 +93,9 @@ class Transcript:
             "responses": [e.to_dict() for e in self.entries],
         }
         atomic_write(directory / "meta.json", json.dumps(meta, indent=2) + "\n")
+        for stale in directory.glob("*.md"):
+            if stale.name not in self.texts:
+                stale.unlink()
 
     def find(self, function: str, attempt: int) -> Entry | None:
         for e in self.entries:

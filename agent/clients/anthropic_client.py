@@ -15,7 +15,7 @@ import os
 from typing import Any
 
 import anthropic
-import httpx
+import httpx2 as httpx
 
 from agent.clients.base import Author, ImageBlock, ModelRequest, ModelResponse, TextBlock, Usage
 from agent.clients.pricing import CACHE_WRITE_FACTOR, Budget, cost_usd, price_of
