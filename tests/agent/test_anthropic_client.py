@@ -84,7 +84,7 @@ def test_transient_errors_are_retried(faults):
 
 def test_persistent_errors_fail_the_call_clearly():
     server = Server([529] * 10)
-    with pytest.raises(ModelCallFailed, match="InternalServerError|overloaded|529"):
+    with pytest.raises(ModelCallFailed, match=r"InternalServerError|overloaded|529"):
         server.client(max_retries=2).complete(REQUEST)
 
 

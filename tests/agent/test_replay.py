@@ -93,7 +93,7 @@ def test_replay_without_a_response_fails_clearly(tmp_path, checker):
 
 
 def test_malformed_transcripts_are_usage_errors(tmp_path):
-    with pytest.raises(TranscriptError, match="no meta.json"):
+    with pytest.raises(TranscriptError, match=r"no meta\.json"):
         ReplayClient(tmp_path)
     (tmp_path / "meta.json").write_text(
         json.dumps({"format": "rivet-transcript/1", "domain": "toy"})
