@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from contracts.errors import RivetError
 
+__all__ = ["RendererUnavailableError", "ToolboxError"]
+
 
 class ToolboxError(RivetError):
     """A toolbox function was called with invalid input or could not do its job."""
