@@ -104,5 +104,5 @@ def load(domain: str, root: Path | None = None, *, meshes: dict[str, Any] | None
     if meshes is None:
         import domains
 
-        meshes = domains.load(domain).meshes
+        meshes = domains.load(domain).meshes()
     return System(domain=domain, manifest=manifest, modules=modules, meshes=meshes)

@@ -1,0 +1,93 @@
+"""What the prompts say about a domain: task text, cameras, meshes, reference images."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+
+import numpy as np
+
+from agent.clients.base import ImageBlock
+from agent.prompt import DomainContext
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="PNG", optimize=True)
+    return buf.getvalue()
+
+
+def depth_visual(depth: np.ndarray) -> np.ndarray:
+    """Depth [m] as an 8-bit grey image, near = bright, invalid (0) = black."""
+    valid = depth > 0
+    out = np.zeros(depth.shape, np.uint8)
+    if valid.any():
+        lo, hi = np.percentile(depth[valid], [1, 99])
+        scaled = 1.0 - np.clip((depth - lo) / max(hi - lo, 1e-6), 0.0, 1.0)
+        out[valid] = (40 + 215 * scaled[valid]).astype(np.uint8)
+    return np.repeat(out[:, :, None], 3, axis=2)
+
+
+def downscale(image: np.ndarray, max_side: int = 960) -> np.ndarray:
+    """Fewer pixels for the model (tokens scale with area); nearest keeps depth edges honest."""
+    h, w = image.shape[:2]
+    step = max(1, int(np.ceil(max(h, w) / max_side)))
+    return image[::step, ::step]
+
+
+def camera_summary(domain) -> str:
+    lines = []
+    for name, spec in domain.cameras.items():
+        cam = domain.camera(name)
+        K = np.asarray(cam["K"])
+        role = "default" if name == "front" else "alternative viewpoint"
+        lines.append(
+            f"- `{name}` ({role}): {cam['width']}×{cam['height']} px, fx = fy = {K[0, 0]:.1f} px, "
+            f"at {list(spec.position)} m looking at {list(spec.target)} m"
+        )
+    lines.append("The camera actually used is always passed to `perceive`; do not hard-code it.")
+    return "\n".join(lines)
+
+
+def mesh_summary(domain) -> str:
+    lines = []
+    for key, spec in domain.mesh_specs.items():
+        mesh = domain.mesh(key)
+        ext = np.round(mesh.extents * 1000).astype(int).tolist()
+        n_sym = len(domain.symmetries(key))
+        users = [o.id for o in domain.objects if o.mesh == key]
+        lines.append(
+            f"- `{key}` (objects: {', '.join(users)}): bounding box {ext} mm, "
+            f"{n_sym} proper symmetries; frame: {spec.frame}"
+        )
+    colours = ", ".join(
+        f"{o.id} rgb{tuple(int(255 * c) for c in o.colour[:3])}" for o in domain.objects
+    )
+    lines.append(f"Object colours: {colours}.")
+    return "\n".join(lines)
+
+
+def build_context(
+    domain, observations: Sequence[tuple[str, dict]] = (), toolbox_docs: str = ""
+) -> DomainContext:
+    """A domain's prompt context; `observations` are (caption, observation) of the reference."""
+    images: list[ImageBlock] = []
+    for caption, obs in observations:
+        images.append(
+            ImageBlock(png=png_bytes(downscale(obs["rgb"])), caption=f"{caption}: colour")
+        )
+        images.append(
+            ImageBlock(
+                png=png_bytes(downscale(depth_visual(obs["depth"]))), caption=f"{caption}: depth"
+            )
+        )
+    return DomainContext(
+        domain=domain.name,
+        task=domain.task,
+        cameras=camera_summary(domain),
+        meshes=mesh_summary(domain),
+        images=tuple(images),
+        toolbox_docs=toolbox_docs,
+    )

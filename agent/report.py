@@ -1,0 +1,145 @@
+"""The HTML report of an authoring run: per function, its attempts, the code diff between
+attempts, the check results, the overlay images and the usage. One self-contained file."""
+
+from __future__ import annotations
+
+import base64
+import difflib
+import html
+import json
+from pathlib import Path
+
+from agent import dag
+from agent.journal import Journal
+
+_CSS = """
+body{font:14px/1.45 system-ui,sans-serif;margin:2em auto;max-width:1100px;color:#222}
+h1{font-size:22px}h2{font-size:18px;margin-top:2em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ddd;padding:3px 8px;text-align:left}
+.passed{color:#1a7f37}.failed,.error{color:#cf222e}.skipped{color:#888}
+details{margin:.5em 0}pre{background:#f6f8fa;padding:8px;overflow:auto;font-size:12px}
+table.diff{font:12px monospace}.diff_add{background:#e6ffec}.diff_sub{background:#ffebe9}.diff_chg{background:#fff5b1}
+img{max-width:100%;border:1px solid #ddd;margin:4px 0}
+"""
+
+
+def _img(path: Path) -> str:
+    data = base64.b64encode(path.read_bytes()).decode()
+    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.name)}">'
+
+
+def write_report(journal: Journal, title: str) -> Path:
+    events = journal.events()
+    usage = {"input": 0, "output": 0, "cache_write": 0, "cache_read": 0, "usd": 0.0}
+    for e in events:
+        if e["event"] == "response":
+            u = e.get("usage", {})
+            usage["input"] += u.get("input_tokens", 0)
+            usage["output"] += u.get("output_tokens", 0)
+            usage["cache_write"] += u.get("cache_write_tokens", 0)
+            usage["cache_read"] += u.get("cache_read_tokens", 0)
+            usage["usd"] += u.get("usd", 0.0)
+    frozen = {e["function"]: e["attempt"] for e in events if e["event"] == "frozen"}
+    out = [
+        f"<!doctype html><meta charset=utf-8><title>{html.escape(title)}</title><style>{_CSS}</style>"
+    ]
+    out.append(f"<h1>{html.escape(title)}</h1>")
+    out.append(
+        "<table><tr><th>function</th><th>attempts</th><th>result</th></tr>"
+        + "".join(
+            f"<tr><td>{f}</td><td>{_attempts(journal, f)}</td><td class={'passed' if f in frozen else 'failed'}>"
+            f"{'frozen at attempt ' + str(frozen[f]) if f in frozen else 'not frozen'}</td></tr>"
+            for f in dag.authoring_order()
+        )
+        + "</table>"
+    )
+    out.append(
+        f"<p>Usage: {usage['input']} input, {usage['output']} output, {usage['cache_write']} cache-write, "
+        f"{usage['cache_read']} cache-read tokens; ${usage['usd']:.2f}.</p>"
+    )
+    for function in dag.authoring_order():
+        n = _attempts(journal, function)
+        if not n:
+            continue
+        out.append(f"<h2>{function}</h2>")
+        previous = None
+        for k in range(1, n + 1):
+            report = journal.saved_report(function, k)
+            draft_path = journal.dir / "drafts" / f"{function}-{k}.py"
+            draft = draft_path.read_text() if draft_path.is_file() else None
+            status = "passed" if report and report["passed"] else "failed"
+            out.append(f"<h3>attempt {k}: <span class={status}>{status}</span></h3>")
+            if report:
+                out.append(
+                    "<table><tr><th>check</th><th>category</th><th>status</th><th>message</th></tr>"
+                )
+                for c in report["checks"]:
+                    out.append(
+                        f"<tr><td>{html.escape(c['name'])}</td><td>{c['category']}</td>"
+                        f"<td class={c['status']}>{c['status']}</td><td>{html.escape(c.get('message', ''))[:400]}</td></tr>"
+                    )
+                out.append("</table>")
+                for c in report["checks"]:
+                    for image in c.get("images", []):
+                        p = Path(image["path"])
+                        p = p if p.is_absolute() else journal.images_dir(function, k) / p
+                        if p.is_file():
+                            out.append(
+                                f"<p>{html.escape(c['name'])}: {html.escape(image.get('caption', ''))}</p>{_img(p)}"
+                            )
+                md = journal.saved_markdown(function, k)
+                if md and not report["passed"]:
+                    out.append(
+                        f"<details><summary>feedback sent to the model</summary><pre>{html.escape(md)}</pre></details>"
+                    )
+            if draft is not None:
+                if previous is not None:
+                    diff = difflib.HtmlDiff(wrapcolumn=90).make_table(
+                        previous.splitlines(),
+                        draft.splitlines(),
+                        f"attempt {k - 1}",
+                        f"attempt {k}",
+                        context=True,
+                    )
+                    out.append(
+                        f"<details open><summary>diff from attempt {k - 1}</summary>{diff}</details>"
+                    )
+                else:
+                    out.append(
+                        f"<details><summary>draft</summary><pre>{html.escape(draft)}</pre></details>"
+                    )
+                previous = draft
+    path = journal.dir / "report.html"
+    path.write_text("\n".join(out))
+    return path
+
+
+def _attempts(journal: Journal, function: str) -> int:
+    return max(
+        (
+            e["attempt"]
+            for e in journal.events()
+            if e["event"] == "checked" and e["function"] == function
+        ),
+        default=0,
+    )
+
+
+def summary(journal: Journal) -> dict:
+    """Per function: attempts and the check counts of its last report (for the manifest)."""
+    out: dict[str, dict] = {}
+    for function in dag.FUNCTIONS:
+        n = _attempts(journal, function)
+        report = journal.saved_report(function, n) if n else None
+        if report:
+            counts = {
+                s: sum(c["status"] == s for c in report["checks"])
+                for s in ("passed", "failed", "skipped")
+            }
+            counts["failed"] += sum(c["status"] == "error" for c in report["checks"])
+            out[function] = {"attempts": n, "checks": counts}
+    return out
+
+
+def dumps(value: object) -> str:
+    return json.dumps(value, indent=2, sort_keys=True)
