@@ -3,6 +3,7 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 
 DOMAIN ?= cubes
+MODEL ?= claude-opus-5
 PY := .venv/bin/python
 UV ?= $(shell command -v uv 2>/dev/null || echo .venv-uv/bin/uv)
 export MUJOCO_GL ?= egl
@@ -38,8 +39,8 @@ format: venv ## apply ruff's formatting and safe fixes
 	.venv/bin/ruff format .
 	.venv/bin/ruff check --fix .
 
-author: venv system sandbox-image ## author DOMAIN's programs (offline replay by default)
-	.venv/bin/rivet author $(DOMAIN)
+author: venv system sandbox-image ## author DOMAIN's programs: replays its reference transcript, or uses MODEL when ANTHROPIC_API_KEY is set
+	.venv/bin/rivet author $(DOMAIN) $(if $(ANTHROPIC_API_KEY),--model $(MODEL))
 
 eval: venv ## evaluate DOMAIN's frozen artifacts on the benchmark set
 	.venv/bin/rivet eval $(DOMAIN) --policy artifacts

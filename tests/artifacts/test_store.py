@@ -1,0 +1,96 @@
+"""Freezing, verification and the thin runtime on a small hand-made program set."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from artifacts import ArtifactError, build_manifest, freeze, load, verify
+
+SOURCES = {
+    "render": "def render(records, meshes, camera):\n    return {'n': len(records)}\n",
+    "perceive": "from render import render\n\ndef perceive(observation, meshes, camera):\n"
+    "    return [{'id': 'a', 'mesh': 'm', 'pose': observation['pose']}]\n",
+    "relate": "RELATIONS = {'on': 'rests on'}\n\ndef relate(records, meshes):\n"
+    "    return {'directed': True, 'multigraph': True, 'graph': {}, "
+    "'nodes': [{'id': r['id']} for r in records], 'edges': []}\n",
+    "plan": "def plan(start, goal):\n    s = start['objects'][0]['pose']; g = goal['objects'][0]['pose']\n"
+    "    return {'status': 'ok', 'steps': [] if s == g else [{'object': 'a', 'target_pose': g}]}\n",
+}
+AUTHOR = {"kind": "people", "names": ["RIVET tests"]}
+
+
+@pytest.fixture
+def root(tmp_path):
+    manifest = build_manifest("toy", SOURCES, author=AUTHOR)
+    assert freeze("toy", SOURCES, manifest, tmp_path)
+    return tmp_path
+
+
+def test_freeze_writes_stable_names_and_a_valid_manifest(root):
+    names = sorted(p.name for p in (root / "toy").iterdir())
+    assert names == ["manifest.json", "perceive.py", "plan.py", "relate.py", "render.py"]
+    manifest, sources = verify("toy", root)
+    assert sources == SOURCES
+    assert manifest["functions"]["plan"]["depends_on"] == ["relate", "perceive"]
+
+
+def test_refreezing_the_same_set_writes_nothing(root):
+    before = (root / "toy" / "manifest.json").read_text()
+    assert not freeze("toy", SOURCES, build_manifest("toy", SOURCES, author=AUTHOR), root)
+    assert (root / "toy" / "manifest.json").read_text() == before
+
+
+def test_a_changed_function_changes_the_set_hash(root):
+    changed = {**SOURCES, "plan": SOURCES["plan"] + "# tweak\n"}
+    m2 = build_manifest("toy", changed, author=AUTHOR)
+    m1, _ = verify("toy", root)
+    assert m2["set_hash"] != m1["set_hash"]
+    assert freeze("toy", changed, m2, root)
+    assert verify("toy", root)[1]["plan"].endswith("# tweak\n")
+
+
+@pytest.mark.parametrize(
+    "name", ["render.py", "perceive.py", "relate.py", "plan.py", "manifest.json"]
+)
+@pytest.mark.parametrize("where", [0, -2])
+def test_one_tampered_byte_is_refused_naming_the_file(root, name, where):
+    path = root / "toy" / name
+    data = bytearray(path.read_bytes())
+    data[where] = (data[where] + 1) % 256
+    path.write_bytes(bytes(data))
+    with pytest.raises(ArtifactError) as info:
+        load("toy", root, meshes={})
+    assert name in str(info.value) or "manifest" in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["render.py", "manifest.json"])
+def test_a_missing_file_is_refused(root, name):
+    (root / "toy" / name).unlink()
+    with pytest.raises(ArtifactError, match=name.replace(".", r"\.")):
+        verify("toy", root)
+
+
+def test_runtime_solves_in_process(root):
+    system = load("toy", root, meshes={})
+    eye = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
+    moved = [[1.0, 0, 0, 0.1], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
+    cam = {"width": 4, "height": 4}
+    plan = system.solve({"pose": eye, "camera": cam}, {"pose": moved, "camera": cam})
+    assert plan == {"status": "ok", "steps": [{"object": "a", "target_pose": moved}]}
+    assert set(system.timings) == {"perceive", "relate", "plan", "total"}
+    assert system.relations_vocabulary == {"on": "rests on"}
+    assert "render" not in sys.modules  # program modules are not left behind
+
+
+def test_runtime_imports_neither_the_model_sdk_nor_docker(root):
+    code = (
+        "import sys; from artifacts import load; from pathlib import Path; "
+        f"load('toy', Path({str(root)!r}), meshes={{}}); "
+        "bad = [m for m in ('anthropic', 'docker') if m in sys.modules]; print(bad)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout.replace("'", '"')) == []
