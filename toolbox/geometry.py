@@ -170,8 +170,10 @@ def rotation_angle_between(R_a: object, R_b: object) -> float:
     """Angle [rad, in [0, π]] of the relative rotation R_aᵀ R_b; accepts (3, 3) or (4, 4)."""
     A = np.asarray(R_a, dtype=float)[:3, :3]
     B = np.asarray(R_b, dtype=float)[:3, :3]
-    c = (np.trace(A.T @ B) - 1.0) / 2.0
-    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+    M = A.T @ B
+    # atan2 keeps full precision near 0 and π, where arccos of the trace loses half the digits.
+    w = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
+    return float(np.arctan2(np.linalg.norm(w) / 2.0, (np.trace(M) - 1.0) / 2.0))
 
 
 def pose_distance(
@@ -202,7 +204,9 @@ def pose_distance(
         axis = np.asarray(continuous_axis, dtype=float).reshape(3)
         axis = axis / np.linalg.norm(axis)
     best: PoseDistance | None = None
-    for S in symmetries if symmetries else (np.eye(4),):
+    if symmetries is not None and len(symmetries) == 0:
+        raise ToolboxError("symmetries is empty; pass None or include the identity")
+    for S in (np.eye(4),) if symmetries is None else symmetries:
         S_m = np.asarray(S, dtype=float)
         B = B0 @ (make_pose(S_m) if S_m.shape == (3, 3) else S_m)
         if axis is None:
@@ -213,8 +217,7 @@ def pose_distance(
         d = PoseDistance(float(np.linalg.norm(A[:3, 3] - B[:3, 3])), rot)
         if best is None or (d.rotation, d.translation) < (best.rotation, best.translation):
             best = d
-    if best is None:  # an empty symmetry list
-        raise ToolboxError("symmetries is empty; pass None or include the identity")
+    assert best is not None  # at least one alternative was scored
     return best
 
 
