@@ -48,9 +48,9 @@ PARK_QPOS = np.array([0.0, -0.6, 0.0, -0.5, 0.0, 3.9, 0.785])
 so that cameras in front of the table (x ≈ 1.0–1.3 m, elevated) do not see the arm over the
 workspace."""
 
-READY_QPOS = np.array([0.0, -0.2, 0.0, -2.3, 0.0, 2.1, 0.785])
-"""Arm posture above the workspace with the gripper pointing down [rad]; the IK's posture
-target and the first waypoint out of the park posture."""
+READY_QPOS = np.array([0.0, -0.35, 0.0, -2.12, 0.0, 1.771, 0.785])
+"""Arm posture above the workspace, TCP at (0.45, 0, 0.40) m pointing down [rad]: the IK's
+posture target and the way in and out of the park posture."""
 
 ARM_VELOCITY_LIMITS = np.array([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
 """FR3 joint speed limits [rad/s] (Franka's datasheet)."""

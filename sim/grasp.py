@@ -1,0 +1,519 @@
+"""Top-down parallel-jaw grasps for the 2F-85, from an object's mesh, its pose and its target.
+
+Design rule: a grasp is chosen once per transfer and held rigidly from pick to place, so it is
+planned in the object's frame and checked at both ends. Candidates come from pairs of
+antiparallel mesh faces that are vertical at the pick pose and no more than the jaws' stroke
+apart; each pair gives two wrist yaws (the gripper is symmetric under a half turn) and the
+object's symmetries give several equivalent place poses. A candidate is kept when the fingers,
+opened for the approach, clear the object itself, the table and every neighbour at the pick
+and at the place. Reachability (the wrist's joint limits) is decided by the caller's IK.
+
+Gripper volumes are boxes in the TCP frame (z along the approach, y along the closing
+direction), measured from the menagerie 2F-85's collision geometry (see `FingerModel`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+from contracts import se3
+from sim.robot import GripperTable, gripper_table
+
+VERTICAL_TOL = np.radians(3.0)  # a face counts as vertical within this tilt
+ANTIPARALLEL_TOL = np.radians(4.0)  # two faces count as opposite within this angle
+YAW_ONLY_TOL = np.radians(3.0)  # pick → place must be a rotation about the vertical
+
+
+@dataclass(frozen=True, kw_only=True)
+class FingerModel:
+    """Boxes around the 2F-85's fingers and palm, in the TCP frame [m].
+
+    Each finger spans `finger_half_width` across the closing direction, `finger_depth` outwards
+    from the pad's contact face and `finger_length` back from its tip towards the palm; the palm
+    (couplers, drivers, base and everything above) spans `palm_half` in x and y above that.
+    """
+
+    finger_half_width: float = 0.012
+    finger_depth: float = 0.033
+    finger_length: float = 0.060
+    palm_half: tuple[float, float] = (0.038, 0.076)
+    clearance: float = 0.008  # jaw opening beyond the object's width, per side, for approach
+    min_clearance: float = 0.0025  # the least per-side opening allowed for wide objects
+    tip_margin: float = 0.003  # fingertips stay this far above whatever is below them
+    min_contact: float = 0.008  # the least pad contact height accepted [m]
+
+    def boxes(self, gap: float, tip: float, margin: float) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Boxes (centre (3,), half extents (3,)) in the TCP frame for jaws `gap` apart with
+        fingertips at depth `tip`, inflated by `margin`; the palm box reaches 1 m back."""
+        out = []
+        half_w, depth, length = self.finger_half_width, self.finger_depth, self.finger_length
+        for side in (-1.0, 1.0):
+            y0 = gap / 2
+            centre = np.array([0.0, side * (y0 + depth / 2), tip - length / 2])
+            half = np.array([half_w, depth / 2, length / 2]) + margin
+            out.append((centre, half))
+        palm_top, palm_bottom = tip - length - 1.0, tip - length
+        centre = np.array([0.0, 0.0, 0.5 * (palm_top + palm_bottom)])
+        half = np.array([self.palm_half[0], self.palm_half[1], 0.5]) + margin
+        out.append((centre, half))
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class Obstacle:
+    """A neighbour at a pose: its id, mesh (object frame) and T_world_object."""
+
+    id: str
+    mesh: trimesh.Trimesh
+    pose: np.ndarray
+
+
+@dataclass(frozen=True, kw_only=True)
+class Grasp:
+    """A top-down grasp held from pick to place.
+
+    Attributes:
+        T_object_tcp: TCP pose in the object's frame (4, 4).
+        width: distance between the gripped faces [m].
+        open_gap: jaw opening for the approach and the release [m].
+        symmetry: index of the symmetry `S` the object is placed with: it ends at target @ S.
+        pick_tcp: TCP pose at the grasp (4, 4), world.
+        place_tcp: TCP pose at the release (4, 4), world.
+        contact_area: pad contact area on each face [m²].
+        transfer_yaw: rotation of the wrist from pick to place [rad], signed.
+        margin: clearance from the neighbours that was verified [m].
+    """
+
+    T_object_tcp: np.ndarray
+    width: float
+    open_gap: float
+    symmetry: int
+    pick_tcp: np.ndarray
+    place_tcp: np.ndarray
+    contact_area: float
+    transfer_yaw: float
+    margin: float
+    score: float = 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class GraspReport:
+    """What `plan_grasps` found: feasible grasps (best first) and why others were dropped."""
+
+    grasps: tuple[Grasp, ...]
+    rejected: dict[str, int] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        if not self.rejected:
+            return "no antiparallel vertical face pair on the mesh"
+        parts = [f"{n} {why}" for why, n in sorted(self.rejected.items(), key=lambda kv: -kv[1])]
+        return "candidates rejected: " + ", ".join(parts)
+
+
+# -- mesh analysis --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Region:
+    normal: np.ndarray  # (3,) object frame, outward
+    offset: float  # plane: normal · x = offset
+    triangles: np.ndarray  # (k, 3, 3) object frame
+
+
+_REGION_CACHE: dict[int, tuple[trimesh.Trimesh, tuple[_Region, ...]]] = {}
+
+
+def _regions(mesh: trimesh.Trimesh) -> tuple[_Region, ...]:
+    """Planar regions of the mesh (trimesh facets and lone faces), cached per mesh object."""
+    hit = _REGION_CACHE.get(id(mesh))
+    if hit is not None and hit[0] is mesh:
+        return hit[1]
+    if len(_REGION_CACHE) > 256:
+        _REGION_CACHE.clear()
+    regions = _compute_regions(mesh)
+    _REGION_CACHE[id(mesh)] = (mesh, regions)
+    return regions
+
+
+def _compute_regions(mesh: trimesh.Trimesh) -> tuple[_Region, ...]:
+    regions = []
+    in_facet = np.zeros(len(mesh.faces), dtype=bool)
+    groups = [np.asarray(f) for f in mesh.facets]
+    for f in groups:
+        in_facet[f] = True
+    groups += [np.array([i]) for i in np.flatnonzero(~in_facet)]
+    for faces in groups:
+        areas = mesh.area_faces[faces]
+        n = (mesh.face_normals[faces] * areas[:, None]).sum(axis=0)
+        n /= np.linalg.norm(n)
+        tris = mesh.vertices[mesh.faces[faces]]
+        regions.append(_Region(n, float(np.mean(tris.reshape(-1, 3) @ n)), tris))
+    return tuple(regions)
+
+
+def _point_in_triangles(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Which points (m, 2) lie inside any of the 2-D triangles (k, 3, 2)."""
+    inside = np.zeros(len(p), dtype=bool)
+    for a, b, c in tris:
+        v0, v1 = c - a, b - a
+        d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+        denom = d00 * d11 - d01 * d01
+        if abs(denom) < 1e-14:
+            continue
+        w = p - a
+        d20, d21 = w @ v0, w @ v1
+        u = (d11 * d20 - d01 * d21) / denom
+        v = (d00 * d21 - d01 * d20) / denom
+        inside |= (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
+    return inside
+
+
+# -- collision of boxes with triangles (separating axis theorem) ----------------------------
+
+
+def boxes_hit_triangles(
+    centre: np.ndarray, half: np.ndarray, R: np.ndarray, tris: np.ndarray
+) -> bool:
+    """True when the box (centre (3,), half extents (3,), axes R (3, 3) columns, world) overlaps
+    any triangle of `tris` (n, 3, 3), world."""
+    if len(tris) == 0:
+        return False
+    v = (tris - centre) @ R  # (n, 3, 3) in the box frame
+    # Box face axes.
+    lo, hi = v.min(axis=1), v.max(axis=1)
+    keep = np.all((lo <= half) & (hi >= -half), axis=1)
+    if not keep.any():
+        return False
+    v = v[keep]
+    e = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)  # (n, 3, 3)
+    # Triangle normal.
+    n = np.cross(e[:, 0], e[:, 1])
+    p = np.einsum("nk,nk->n", n, v[:, 0])
+    r = np.abs(n) @ half
+    sep = np.abs(p) > r
+    # Nine edge × axis cross products.
+    basis = np.eye(3)
+    for i in range(3):
+        for j in range(3):
+            a = np.cross(e[:, i], basis[j])  # (n, 3)
+            proj = np.einsum("nk,nvk->nv", a, v)
+            r = np.abs(a) @ half
+            sep |= (proj.min(axis=1) > r) | (proj.max(axis=1) < -r)
+    return bool((~sep).any())
+
+
+def _world_triangles(mesh: trimesh.Trimesh, pose: np.ndarray) -> np.ndarray:
+    tris = mesh.vertices[mesh.faces]  # (n, 3, 3)
+    return tris @ pose[:3, :3].T + pose[:3, 3]
+
+
+def _gripper_hits(
+    T_world_tcp: np.ndarray,
+    gap: float,
+    tip: float,
+    margin: float,
+    triangle_sets: Sequence[np.ndarray],
+    fingers: FingerModel,
+) -> bool:
+    R = T_world_tcp[:3, :3]
+    for centre, half in fingers.boxes(gap, tip, margin):
+        c = T_world_tcp[:3, :3] @ centre + T_world_tcp[:3, 3]
+        for tris in triangle_sets:
+            if boxes_hit_triangles(c, half, R, tris):
+                return True
+    return False
+
+
+# -- candidates -----------------------------------------------------------------------------
+
+
+def _yaw_of(R: np.ndarray) -> float:
+    return float(np.arctan2(R[1, 0], R[0, 0]))
+
+
+def _wrap(a: float) -> float:
+    return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
+@dataclass(frozen=True)
+class _FacePair:
+    closing: np.ndarray  # (3,) world, horizontal, from face B to face A
+    width: float
+    centre: np.ndarray  # (3,) world: mid-plane point at the chosen contact
+    tip_z: float  # world z of the fingertips at contact
+    contact_area: float
+
+
+def _face_pairs(
+    mesh: trimesh.Trimesh,
+    T_pick: np.ndarray,
+    max_width: float,
+    fingers: FingerModel,
+    table: GripperTable,
+    rejected: dict[str, int],
+) -> list[_FacePair]:
+    R, t = T_pick[:3, :3], T_pick[:3, 3]
+    regions = _regions(mesh)
+    normals = np.array([r.normal for r in regions]) @ R.T  # world
+    vertical = np.abs(normals[:, 2]) < np.sin(VERTICAL_TOL)
+    idx = np.flatnonzero(vertical)
+    obj_tris = _world_triangles(mesh, T_pick)
+    bottom = float(obj_tris[..., 2].min())
+    com = R @ np.asarray(mesh.center_mass if mesh.is_volume else mesh.centroid) + t
+    pairs = []
+    for ia in idx:
+        for ib in idx:
+            if ib <= ia:
+                continue
+            na, nb = normals[ia], normals[ib]
+            if na @ nb > -np.cos(ANTIPARALLEL_TOL):
+                continue
+            n = na - nb
+            n[2] = 0.0
+            n /= np.linalg.norm(n)
+            tri_a = regions[ia].triangles @ R.T + t
+            tri_b = regions[ib].triangles @ R.T + t
+            width = float(np.mean(tri_a.reshape(-1, 3) @ n) - np.mean(tri_b.reshape(-1, 3) @ n))
+            if width <= 0.002:
+                continue  # not enclosing the object
+            if width > max_width:
+                rejected["too wide"] = rejected.get("too wide", 0) + 1
+                continue
+            pair = _contact_patch(n, width, tri_a, tri_b, obj_tris, bottom, com, fingers, table)
+            if pair is None:
+                rejected["too small a contact patch"] = (
+                    rejected.get("too small a contact patch", 0) + 1
+                )
+                continue
+            pairs.append(pair)
+    return pairs
+
+
+def _contact_patch(
+    n: np.ndarray,
+    width: float,
+    tri_a: np.ndarray,
+    tri_b: np.ndarray,
+    obj_tris: np.ndarray,
+    bottom: float,
+    com: np.ndarray,
+    fingers: FingerModel,
+    table: GripperTable,
+) -> _FacePair | None:
+    """Where the pads touch a face pair: the overlap of both faces seen along `n`, as low as the
+    fingers may go, centred on the object's centre of mass where the overlap allows."""
+    u_axis = np.cross(np.array([0.0, 0.0, 1.0]), n)
+
+    def to2d(tris: np.ndarray) -> np.ndarray:
+        return np.stack([tris @ u_axis, tris[..., 2]], axis=-1)  # (k, 3, 2)
+
+    a2, b2 = to2d(tri_a), to2d(tri_b)
+    lo = np.maximum(a2.reshape(-1, 2).min(0), b2.reshape(-1, 2).min(0))
+    hi = np.minimum(a2.reshape(-1, 2).max(0), b2.reshape(-1, 2).max(0))
+    if np.any(hi - lo < fingers.min_contact * 0.5):
+        return None
+    step = 0.001
+    us = np.arange(lo[0] + step / 2, hi[0], step)
+    zs = np.arange(lo[1] + step / 2, hi[1], step)
+    if len(us) == 0 or len(zs) == 0:
+        return None
+    grid = np.stack(np.meshgrid(us, zs), axis=-1).reshape(-1, 2)
+    mask = (_point_in_triangles(grid, a2) & _point_in_triangles(grid, b2)).reshape(len(zs), len(us))
+    rows = np.flatnonzero(mask.any(axis=1))
+    if len(rows) == 0:
+        return None
+    z_lo = max(float(zs[rows[0]]) - step / 2, bottom) + fingers.tip_margin
+    z_hi = float(zs[rows[-1]]) + step / 2
+    if z_hi - z_lo < fingers.min_contact:
+        return None
+    z_top = min(z_hi, z_lo + table.pad_height)
+    band = (zs >= z_lo) & (zs <= z_top)
+    cols = mask[band].all(axis=0)
+    if not cols.any():
+        return None
+    # The contiguous run of columns nearest the centre of mass.
+    u_com = float(com @ u_axis)
+    runs, start = [], None
+    for i, c in enumerate([*cols, False]):
+        if c and start is None:
+            start = i
+        elif not c and start is not None:
+            runs.append((float(us[start]) - step / 2, float(us[i - 1]) + step / 2))
+            start = None
+    u0, u1 = min(
+        runs,
+        key=lambda r: 0.0 if r[0] <= u_com <= r[1] else min(abs(r[0] - u_com), abs(r[1] - u_com)),
+    )
+    half_pad = table.pad_width / 2
+    u_c = (
+        (u0 + u1) / 2
+        if u1 - u0 <= 2 * half_pad
+        else float(np.clip(u_com, u0 + half_pad, u1 - half_pad))
+    )
+    area = min(u1 - u0, table.pad_width) * (z_top - z_lo)
+    mid_plane = 0.5 * (np.mean(tri_a.reshape(-1, 3) @ n) + np.mean(tri_b.reshape(-1, 3) @ n))
+    centre = u_c * u_axis + mid_plane * n
+    centre[2] = z_lo
+    return _FacePair(closing=n, width=width, centre=centre, tip_z=z_lo, contact_area=area)
+
+
+def _tcp_pose(closing: np.ndarray, centre_xy: np.ndarray, tcp_z: float) -> np.ndarray:
+    """Top-down TCP pose: z down, y along `closing` (horizontal)."""
+    z = np.array([0.0, 0.0, -1.0])
+    y = closing / np.linalg.norm(closing)
+    x = np.cross(y, z)
+    return se3.make(np.column_stack([x, y, z]), [centre_xy[0], centre_xy[1], tcp_z])
+
+
+def plan_grasps(
+    mesh: trimesh.Trimesh,
+    T_pick: np.ndarray,
+    T_target: np.ndarray,
+    *,
+    symmetries: Sequence[np.ndarray] | None = None,
+    pick_obstacles: Sequence[Obstacle] = (),
+    place_obstacles: Sequence[Obstacle] = (),
+    fingers: FingerModel | None = None,
+    table_z: float = 0.0,
+    max_width: float = 0.080,
+    margins: Sequence[float] = (0.006, 0.002),
+    max_symmetries: int = 4,
+) -> GraspReport:
+    """Feasible top-down grasps to move `mesh` from `T_pick` to `T_target`, best first.
+
+    Args:
+        mesh: the object's mesh in its own frame [m].
+        T_pick, T_target: its current and target poses (4, 4).
+        symmetries: object-frame transforms S with mesh(S v) = mesh(v); the object may end at
+            T_target @ S for any of them. None: the identity only.
+        pick_obstacles / place_obstacles: neighbours around the pick and the place.
+        table_z: height of the table top [m]; fingertips stay above it.
+        max_width: widest face pair the jaws take [m].
+        margins: clearances tried against neighbours [m], larger (preferred) first.
+        max_symmetries: per face pair and wrist yaw, how many place options (fewest wrist
+            rotation first) are checked.
+    """
+    fingers = fingers or FingerModel()
+    table = gripper_table()
+    T_pick = np.asarray(T_pick, dtype=float)
+    T_target = np.asarray(T_target, dtype=float)
+    syms = [np.eye(4)] if symmetries is None or len(symmetries) == 0 else list(symmetries)
+    rejected: dict[str, int] = {}
+
+    # Place options: the symmetric targets reachable by a rotation about the vertical.
+    options = []  # (index, T_place, yaw of pick → place)
+    for k, S in enumerate(syms):
+        T_place = T_target @ np.asarray(S, dtype=float)
+        R_rel = T_place[:3, :3] @ T_pick[:3, :3].T
+        if np.arccos(np.clip(R_rel[2, 2], -1.0, 1.0)) > YAW_ONLY_TOL:
+            continue
+        options.append((k, T_place, _yaw_of(R_rel)))
+    if not options:
+        return GraspReport(
+            grasps=(), rejected={"target tilted from the pick pose (top-down grasp cannot)": 1}
+        )
+
+    pairs = _face_pairs(mesh, T_pick, max_width, fingers, table, rejected)
+    own_pick = _world_triangles(mesh, T_pick)
+    pick_sets = [_world_triangles(o.mesh, o.pose) for o in pick_obstacles]
+    place_sets = [_world_triangles(o.mesh, o.pose) for o in place_obstacles]
+    T_pick_inv = se3.inverse(T_pick)
+    grasps: list[Grasp] = []
+    for pair in pairs:
+        side = (max_width + 0.005 - pair.width) / 2
+        clearance = min(fingers.clearance, side)
+        if clearance < fingers.min_clearance:
+            rejected["too wide"] = rejected.get("too wide", 0) + 1
+            continue
+        open_gap = pair.width + 2 * clearance
+        tip_contact = table.tip_at_gap(pair.width)
+        tip_open = table.tip_at_gap(open_gap)
+        tcp_z = pair.tip_z + tip_contact  # the TCP sits above the fingertips
+        reach = max(tip_contact, tip_open)  # deepest fingertip during approach and closing
+        if pair.tip_z < table_z + fingers.tip_margin - 0.001:
+            rejected["fingertips below the table"] = (
+                rejected.get("fingertips below the table", 0) + 1
+            )
+            continue
+        for flip in (1.0, -1.0):
+            tcp_pick = _tcp_pose(flip * pair.closing, pair.centre[:2], tcp_z)
+            # The object itself: nothing may stick out into the jaws' path.
+            if _gripper_hits(tcp_pick, pair.width + 0.002, reach, 0.0, [own_pick], fingers) or (
+                _gripper_hits(tcp_pick, open_gap, reach, 0.0, [own_pick], fingers)
+            ):
+                rejected["fingers hit the object itself"] = (
+                    rejected.get("fingers hit the object itself", 0) + 1
+                )
+                break  # the same volumes for both flips
+            T_obj_tcp = T_pick_inv @ tcp_pick
+            ranked = sorted(options, key=lambda o: abs(o[2]))[:max_symmetries]
+            for k, T_place, _dyaw in ranked:
+                tcp_place = T_place @ T_obj_tcp
+                if tcp_place[2, 3] - reach < table_z + fingers.tip_margin - 0.001:
+                    rejected["fingertips below the table at the place"] = (
+                        rejected.get("fingertips below the table at the place", 0) + 1
+                    )
+                    continue
+                margin = _clear_margin(
+                    tcp_pick, tcp_place, open_gap, reach, pick_sets, place_sets, margins, fingers
+                )
+                if margin is None:
+                    rejected["fingers hit a neighbour"] = (
+                        rejected.get("fingers hit a neighbour", 0) + 1
+                    )
+                    continue
+                grasps.append(
+                    Grasp(
+                        T_object_tcp=T_obj_tcp,
+                        width=pair.width,
+                        open_gap=open_gap,
+                        symmetry=k,
+                        pick_tcp=tcp_pick,
+                        place_tcp=tcp_place,
+                        contact_area=pair.contact_area,
+                        transfer_yaw=_wrap(_yaw_of(tcp_place[:3, :3]) - _yaw_of(tcp_pick[:3, :3])),
+                        margin=margin,
+                        score=_score(pair, margin, tcp_pick, tcp_place, T_pick, mesh),
+                    )
+                )
+    grasps.sort(key=lambda g: -g.score)
+    return GraspReport(grasps=tuple(grasps), rejected=rejected)
+
+
+def _clear_margin(
+    tcp_pick: np.ndarray,
+    tcp_place: np.ndarray,
+    gap: float,
+    reach: float,
+    pick_sets: Sequence[np.ndarray],
+    place_sets: Sequence[np.ndarray],
+    margins: Sequence[float],
+    fingers: FingerModel,
+) -> float | None:
+    for margin in margins:
+        if not _gripper_hits(tcp_pick, gap, reach, margin, pick_sets, fingers) and not (
+            _gripper_hits(tcp_place, gap, reach, margin, place_sets, fingers)
+        ):
+            return float(margin)
+    return None
+
+
+def _score(
+    pair: _FacePair,
+    margin: float,
+    tcp_pick: np.ndarray,
+    tcp_place: np.ndarray,
+    T_pick: np.ndarray,
+    mesh: trimesh.Trimesh,
+) -> float:
+    """Higher is better: roomy clearance, a large contact patch, little wrist rotation, a grip
+    near the centre of mass."""
+    com = T_pick[:3, :3] @ np.asarray(mesh.center_mass if mesh.is_volume else mesh.centroid)
+    com += T_pick[:3, 3]
+    off_com = float(np.linalg.norm(com[:2] - tcp_pick[:2, 3]))
+    dyaw = abs(_wrap(_yaw_of(tcp_place[:3, :3]) - _yaw_of(tcp_pick[:3, :3])))
+    return 1000.0 * margin + 2.0 * min(pair.contact_area / 4e-4, 1.0) - 1.0 * dyaw - 20.0 * off_com
