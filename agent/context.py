@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 from collections.abc import Sequence
 
 import numpy as np
@@ -67,6 +68,20 @@ def mesh_summary(domain) -> str:
     )
     lines.append(f"Object colours: {colours}.")
     return "\n".join(lines)
+
+
+def reference_observations(domain) -> list[tuple[str, dict]]:
+    """Observations of the authoring reference (benchmark goal 1, start 1) from the front camera."""
+    from sim.render import observe
+
+    path = domain.benchmark_path(1, 1)
+    from domains.base import Instance
+
+    instance = Instance.from_dict(json.loads(path.read_text()))
+    return [
+        ("reference start", observe(domain, instance.start, "front")),
+        ("reference goal", observe(domain, instance.goal, "front")),
+    ]
 
 
 def build_context(

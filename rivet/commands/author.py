@@ -31,16 +31,10 @@ def _client(args: argparse.Namespace, domain, run_dir: Path):
     return ReplayClient(Path(replay), strict=args.strict, budget=budget)
 
 
-def _reference_observations(domain) -> list[tuple[str, dict]]:
-    from sim.render import reference_observations
-
-    return reference_observations(domain)
-
-
 def run(args: argparse.Namespace) -> int:
     import domains
     from agent.checking import SuiteChecker
-    from agent.context import build_context
+    from agent.context import build_context, reference_observations
     from agent.errors import AgentError
     from agent.journal import Journal, latest_run_dir, new_run_dir
     from agent.loop import AuthoringRun
@@ -51,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
 
     domain = domains.load(args.domain)
     runs_root = Path(args.runs_dir)
-    ctx = build_context(domain, _reference_observations(domain), toolbox_docs())
+    ctx = build_context(domain, reference_observations(domain), toolbox_docs())
     checker = SuiteChecker(sandbox=args.sandbox, thorough=args.thorough)
     results = []
     for i in range(args.runs):
