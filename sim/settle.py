@@ -1,0 +1,200 @@
+"""Physical validity: geometry checks, settling, and checks of construction orders.
+
+A scene is physically valid when
+- every object lies inside the domain's reachable workspace (every mesh vertex), no higher
+  than `Domain.max_height`;
+- nothing penetrates the table or another object by more than `PENETRATION` (1 mm);
+- it is settled: simulating it without the robot for `DURATION` (2 s), no point of any
+  object moves more than `MOTION` (2 mm).
+The first two are pure geometry (exact convex-part separations); the last is MuJoCo.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from domains import Domain
+from domains._geometry import bodies_of, body_separation, supports
+from sim.errors import InvalidSceneError
+from sim.scene import scene_model
+
+PENETRATION = 0.001  # [m]
+MOTION = 0.002  # [m]
+DURATION = 2.0  # [s]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Problem:
+    """Something physically wrong with one object (or with the scene when `object` is None)."""
+
+    object: str | None
+    problem: str
+
+    def __str__(self) -> str:
+        return (
+            f"object {self.object!r}: {self.problem}" if self.object is not None else self.problem
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class SettleResult:
+    """The outcome of simulating a scene at rest."""
+
+    scene: dict  # the scene with the poses after `duration`
+    motion: dict[str, float]  # largest displacement of any vertex of each object [m]
+    speed: dict[str, float]  # final linear speed of each object [m/s]
+
+    @property
+    def settled(self) -> bool:
+        return all(m <= MOTION for m in self.motion.values())
+
+
+def geometric_problems(domain: Domain, scene: Mapping) -> list[Problem]:
+    """Workspace, table and interpenetration problems of a parsed scene (no simulation)."""
+    out: list[Problem] = []
+    bodies = bodies_of(scene["objects"], domain.parts)
+    ws = domain.workspace
+    for b in bodies:
+        xy = b.xy()
+        if not ws.contains(xy):
+            far = xy[np.argmax(np.linalg.norm(xy - [np.mean(ws.x), 0], axis=1))]
+            out.append(
+                Problem(
+                    object=b.id,
+                    problem=(
+                        f"outside the reachable workspace (a point at x={far[0]:.3f}, y={far[1]:.3f} m; "
+                        f"allowed x∈[{ws.x[0]}, {ws.x[1]}], y∈[{ws.y[0]}, {ws.y[1]}], "
+                        f"within {ws.reach} m of the base)"
+                    ),
+                )
+            )
+        if b.lowest < -PENETRATION:
+            out.append(
+                Problem(object=b.id, problem=f"penetrates the table by {-b.lowest * 1000:.1f} mm")
+            )
+        if b.highest > domain.max_height:
+            out.append(
+                Problem(
+                    object=b.id, problem=f"reaches z={b.highest:.3f} m, above {domain.max_height} m"
+                )
+            )
+    for i, a in enumerate(bodies):
+        for b in bodies[i + 1 :]:
+            gap, _ = body_separation(a, b, cutoff=0.0)
+            if gap < -PENETRATION:
+                out.append(
+                    Problem(object=a.id, problem=f"penetrates {b.id!r} by {-gap * 1000:.1f} mm")
+                )
+    return out
+
+
+def settle(domain: Domain, scene: Mapping, *, duration: float = DURATION) -> SettleResult:
+    """Simulate the objects (no robot) for `duration` [s] from rest."""
+    sm = scene_model(domain, scene)
+    before = {r["id"]: np.asarray(r["pose"], float) for r in scene["objects"]}
+    steps = round(duration / sm.model.opt.timestep)
+    for _ in range(steps):
+        mujoco.mj_step(sm.model, sm.data)
+    after = sm.records()
+    motion, speed = {}, {}
+    for r in after:
+        verts = np.concatenate([p.vertices for p in domain.parts[r["mesh"]]])
+        h = np.c_[verts, np.ones(len(verts))]
+        d = h @ (r["pose"] - before[r["id"]]).T
+        motion[r["id"]] = float(np.linalg.norm(d[:, :3], axis=1).max())
+        a = sm.qvel_address(r["id"])
+        speed[r["id"]] = float(np.linalg.norm(sm.data.qvel[a : a + 3]))
+    return SettleResult(scene={"domain": domain.name, "objects": after}, motion=motion, speed=speed)
+
+
+def physical_problems(
+    domain: Domain, scene: Mapping, *, duration: float = DURATION
+) -> list[Problem]:
+    """Objects that move more than `MOTION` when the scene is simulated for `duration` [s]."""
+    result = settle(domain, scene, duration=duration)
+    return [
+        Problem(
+            object=i,
+            problem=f"is not at rest: moves {m * 1000:.1f} mm in {duration:g} s of simulation",
+        )
+        for i, m in result.motion.items()
+        if m > MOTION
+    ]
+
+
+def check_scene(domain: Domain, scene: Mapping) -> list[Problem]:
+    """Every problem of a parsed scene: geometry first, physics only if the geometry is sound."""
+    return geometric_problems(domain, scene) or physical_problems(domain, scene)
+
+
+def validate_scene(domain: Domain, scene: Mapping, *, where: str = "") -> None:
+    """Raise InvalidSceneError (exit code 2) naming the first problem of a parsed scene."""
+    problems = check_scene(domain, scene)
+    if problems:
+        raise InvalidSceneError(
+            problems[0].object,
+            problems[0].problem,
+            problems=[(p.object, p.problem) for p in problems],
+            where=where,
+        )
+
+
+def check_order(
+    domain: Domain, start: Mapping, steps: Sequence[Mapping], goal: Mapping, *, physics: bool = True
+) -> list[Problem]:
+    """Problems of executing `steps` from `start` by teleporting one object per step.
+
+    Checks, at every step: the moved object has nothing resting on it; the state after the
+    move is physically valid (geometry, and settling when `physics`); and at the end every
+    object is at its goal pose within the domain's tolerance, modulo symmetry.
+    """
+    from sim.score import pose_within  # score imports settle; import late
+
+    state = {r["id"]: dict(r) for r in start["objects"]}
+    out: list[Problem] = []
+    for k, step in enumerate(steps):
+        i = step["object"]
+        if i not in state:
+            return [Problem(object=i, problem=f"step {k}: not in the scene")]
+        records = list(state.values())
+        sup = supports(bodies_of(records, domain.parts))
+        loaded = [j for j, s in sup.items() if i in s]
+        if loaded:
+            out.append(
+                Problem(object=i, problem=f"step {k}: moved while {loaded[0]!r} rests on it")
+            )
+        state[i] = {**state[i], "pose": np.asarray(step["target_pose"], float)}
+        scene = {"domain": domain.name, "objects": list(state.values())}
+        found = geometric_problems(domain, scene)
+        if not found and physics:
+            found = physical_problems(domain, scene)
+        out += [
+            Problem(object=p.object, problem=f"after step {k} ({i}): {p.problem}") for p in found
+        ]
+        if out:
+            return out
+    for g in goal["objects"]:
+        if not pose_within(domain, state[g["id"]]["pose"], g["pose"], g["mesh"]):
+            out.append(
+                Problem(object=g["id"], problem="is not at its goal pose after the last step")
+            )
+    return out
+
+
+__all__ = [
+    "DURATION",
+    "MOTION",
+    "PENETRATION",
+    "Problem",
+    "SettleResult",
+    "check_order",
+    "check_scene",
+    "geometric_problems",
+    "physical_problems",
+    "settle",
+    "validate_scene",
+]
