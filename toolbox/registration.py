@@ -1,6 +1,7 @@
 """3D registration: ICP, FPFH/RANSAC global registration, and mesh-to-segment 6D pose fitting.
 
-Design rule: thin, deterministic wrappers around Open3D (seeded RANSAC). Points are (N, 3)
+Design rule: deterministic — the same inputs and seed give bit-identical results (Open3D only
+computes FPFH features; ICP and RANSAC are single-threaded numpy). Points are (N, 3)
 float arrays [m]. A result's `transform` maps *source* points into the *target* frame
 (`target ≈ transform_points(result.transform, source)`); for `register_mesh_to_points` it is
 `T_world_object`. `fitness` is the fraction of source points with a target point within
@@ -12,10 +13,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from toolbox import _icp
 from toolbox._common import check_points
 from toolbox.errors import ToolboxError
-from toolbox.geometry import cube_symmetries, invert_pose, make_pose, rotation_about_axis
+from toolbox.geometry import cube_symmetries, invert_pose, make_pose
+from toolbox.vision import voxel_downsample
 
 __all__ = [
     "RegistrationResult",
@@ -59,25 +63,12 @@ def icp(
     Returns:
         RegistrationResult. Raises ToolboxError when either cloud has fewer than 3 points.
     """
-    o3d = _o3d()
     src, tgt = _cloud(source, "source"), _cloud(target, "target")
-    T0 = np.eye(4) if init is None else np.asarray(init, dtype=float)
-    if point_to_plane:
-        tgt.estimate_normals(
-            o3d.geometry.KDTreeSearchParamHybrid(radius=2 * max_distance, max_nn=30)
-        )
-        method = o3d.pipelines.registration.TransformationEstimationPointToPlane()
-    else:
-        method = o3d.pipelines.registration.TransformationEstimationPointToPoint()
-    r = o3d.pipelines.registration.registration_icp(
-        src,
-        tgt,
-        max_distance,
-        T0,
-        method,
-        o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=int(iterations)),
-    )
-    return _result(r)
+    T0 = np.eye(4) if init is None else _pose(init)
+    tree = cKDTree(tgt)
+    normals = _icp.estimate_normals(tgt, tree) if point_to_plane else None
+    T, fitness, rmse = _icp.icp(src, tgt, T0, max_distance, iterations, tree=tree, normals=normals)
+    return RegistrationResult(transform=T, fitness=fitness, rmse=rmse)
 
 
 def global_registration(
@@ -95,31 +86,18 @@ def global_registration(
     given `seed`. Fails (low fitness) on featureless or highly symmetric shapes, where the
     rotation is ambiguous anyway; check `fitness` before trusting the result.
     """
-    o3d = _o3d()
-    reg = o3d.pipelines.registration
-    src, fs = _features(_cloud(source, "source"), voxel_size)
-    tgt, ft = _features(_cloud(target, "target"), voxel_size)
-    o3d.utility.random.seed(int(seed))
+    src, tgt = _cloud(source, "source"), _cloud(target, "target")
+    src_down, fs = _features(src, voxel_size)
+    tgt_down, ft = _features(tgt, voxel_size)
     dist = 1.5 * voxel_size
-    r = reg.registration_ransac_based_on_feature_matching(
-        src,
-        tgt,
-        fs,
-        ft,
-        True,
-        dist,
-        reg.TransformationEstimationPointToPoint(False),
-        3,
-        [
-            reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
-            reg.CorrespondenceCheckerBasedOnDistance(dist),
-        ],
-        reg.RANSACConvergenceCriteria(100000, 0.999),
-    )
-    result = _result(r)
+    pairs = _icp.match_features(fs, ft)
+    T = _icp.ransac(src_down, tgt_down, pairs, dist, seed=int(seed))
+    tree = cKDTree(tgt)
     if refine:
-        result = icp(source, target, init=result.transform, max_distance=dist)
-    return result
+        T, fitness, rmse = _icp.icp(src, tgt, T, dist, 50, tree=tree)
+    else:
+        fitness, rmse = _icp.score(src, T, tree, dist)
+    return RegistrationResult(transform=T, fitness=fitness, rmse=rmse)
 
 
 def register_mesh_to_points(
@@ -139,6 +117,7 @@ def register_mesh_to_points(
     hidden parts of the mesh cost nothing. Hypotheses: FPFH/RANSAC global registration, `init`
     if given, and 24 axis-aligned orientations about the segment's centroid; each is refined
     by ICP and the one explaining most observed points (then lowest rmse) wins.
+    Deterministic for a given `seed`; takes ~0.1–0.5 s.
 
     Args:
         mesh: trimesh.Trimesh in its canonical object frame [m].
@@ -161,80 +140,77 @@ def register_mesh_to_points(
         raise ToolboxError(f"need at least 10 observed points, got {len(P)}")
     if mesh is None or len(getattr(mesh, "faces", ())) == 0:
         raise ToolboxError("mesh has no faces")
-    diag = float(np.linalg.norm(mesh.extents))
-    voxel = voxel_size or diag / 25.0
+    voxel = voxel_size or float(np.linalg.norm(mesh.extents)) / 25.0
     dist = max_distance or 1.5 * voxel
-    model = _sample_surface(mesh, n_samples, seed)
-    obs = _voxel(P, voxel)
-    if len(obs) < 10:
-        obs = P
-    centroid = obs.mean(axis=0)
-    model_centre = mesh.bounds.mean(axis=0)
-    starts = []  # T_object_world guesses
-    if init is not None:
-        starts.append(invert_pose(init))
-    glob = global_registration(obs, model, voxel_size=voxel, refine=False, seed=seed)
-    starts.append(glob.transform)
-    for S in cube_symmetries():
-        for yaw in (0.0, np.pi / 4):
-            R = S[:3, :3] @ rotation_about_axis((0, 0, 1), yaw)
-            starts.append(make_pose(R, model_centre - R @ centroid))
-    coarse = [icp(obs, model, init=T, max_distance=3 * dist, iterations=30) for T in starts]
-    coarse.sort(key=lambda r: (-r.fitness, r.rmse))
-    best = None
-    for c in coarse[:4]:
-        fine = icp(obs, model, init=c.transform, max_distance=dist, point_to_plane=True)
-        if best is None or (fine.fitness, -fine.rmse) > (best.fitness, -best.rmse):
-            best = fine
-    return RegistrationResult(
-        transform=invert_pose(best.transform), fitness=best.fitness, rmse=best.rmse
+    model, model_normals = _sample_surface(mesh, n_samples, seed)
+    obs = voxel_downsample(P, voxel / 2.0)  # for the final fit
+    coarse_obs = voxel_downsample(P, voxel)  # for screening the hypotheses
+    if len(coarse_obs) < 10:
+        obs = coarse_obs = P
+    tree = cKDTree(model)
+    centroid, model_centre = obs.mean(axis=0), mesh.bounds.mean(axis=0)
+    starts = [] if init is None else [invert_pose(_pose(init))]  # T_object_world guesses
+    starts.append(
+        global_registration(coarse_obs, model, voxel_size=voxel, refine=False, seed=seed).transform
     )
+    for S in cube_symmetries():
+        R = S[:3, :3]
+        starts.append(make_pose(R, model_centre - R @ centroid))
+    coarse = []
+    for T0 in starts:
+        T, fitness, rmse = _icp.icp(coarse_obs, model, T0, 3 * dist, 20, tree=tree)
+        coarse.append((-fitness, rmse, len(coarse), T))
+    coarse.sort(key=lambda c: c[:3])
+    best = None
+    for *_, T0 in coarse[:4]:
+        T, fitness, rmse = _icp.icp(obs, model, T0, dist, 50, tree=tree, normals=model_normals)
+        if best is None or (fitness, -rmse) > (best[1], -best[2]):
+            best = (T, fitness, rmse)
+    T, fitness, rmse = best
+    return RegistrationResult(transform=invert_pose(T), fitness=fitness, rmse=rmse)
 
 
 def _o3d():
     import open3d as o3d
 
-    # Open3D prints warnings (e.g. "too few correspondences") straight to stdout.
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     return o3d
 
 
-def _cloud(points: object, name: str):
+def _cloud(points: object, name: str) -> np.ndarray:
     P = check_points(points, name)
     if len(P) < 3:
         raise ToolboxError(f"{name} needs at least 3 points, got {len(P)}")
-    o3d = _o3d()
-    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
+    return P
 
 
-def _features(cloud, voxel: float):
+def _pose(T: object) -> np.ndarray:
+    M = np.asarray(T, dtype=float)
+    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+        raise ToolboxError(f"init must be a finite (4, 4) pose, got shape {M.shape}")
+    return M
+
+
+def _features(P: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Downsampled points (n, 3) and their FPFH descriptors (n, 33) (Open3D, per point, so
+    deterministic)."""
     o3d = _o3d()
-    down = cloud.voxel_down_sample(voxel)
-    down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
+    down = voxel_downsample(P, voxel)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(down))
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
+    # FPFH depends on the normals' sign, which PCA leaves arbitrary: point them away from
+    # the centroid in both clouds so that the same surface gets the same descriptor.
+    cloud.orient_normals_towards_camera_location(down.mean(axis=0))
+    cloud.normals = o3d.utility.Vector3dVector(-np.asarray(cloud.normals))
     f = o3d.pipelines.registration.compute_fpfh_feature(
-        down, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+        cloud, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
     )
-    return down, f
+    return down, np.asarray(f.data).T
 
 
-def _voxel(P: np.ndarray, voxel: float) -> np.ndarray:
-    o3d = _o3d()
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
-    return np.asarray(cloud.voxel_down_sample(voxel).points)
-
-
-def _sample_surface(mesh, n: int, seed: int) -> np.ndarray:
-    """Evenly spread surface samples (deterministic for a seed)."""
+def _sample_surface(mesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Area-uniform surface samples (n, 3) and their face normals (deterministic for a seed)."""
     import trimesh
 
-    pts, _ = trimesh.sample.sample_surface_even(mesh, int(n), seed=seed)
-    if len(pts) < n // 2:  # sample_surface_even rejects points; top up
-        extra, _ = trimesh.sample.sample_surface(mesh, int(n) - len(pts), seed=seed)
-        pts = np.vstack([pts, extra])
-    return np.asarray(pts, dtype=float)
-
-
-def _result(r) -> RegistrationResult:
-    T = np.array(r.transformation, dtype=float)
-    rmse = float(r.inlier_rmse) if r.fitness > 0 else float("inf")
-    return RegistrationResult(transform=T, fitness=float(r.fitness), rmse=rmse)
+    pts, face = trimesh.sample.sample_surface(mesh, int(n), seed=seed)
+    return np.asarray(pts, dtype=float), np.asarray(mesh.face_normals, dtype=float)[face]
