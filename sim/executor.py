@@ -704,7 +704,8 @@ class Executor:
 
     def _finish(self, *, park: bool) -> None:
         self._held_release()
-        if park:
+        parked = float(np.max(np.abs(self._q_cmd - robot.PARK_QPOS))) < 1e-2
+        if park and not parked:
             c = self.config
             T_now = self.ik.fk(self._q_cmd)
             up = T_now.copy()
