@@ -1,0 +1,1 @@
+"""The check suites that decide whether a draft is frozen (work in progress)."""
