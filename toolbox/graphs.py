@@ -67,7 +67,7 @@ def graph_from_json(data: dict) -> nx.MultiDiGraph:
     """Relation graph from node-link JSON (key "edges"); raises ToolboxError when malformed."""
     try:
         G = nx.node_link_graph(data, directed=True, multigraph=True, edges="edges")
-    except (KeyError, TypeError, nx.NetworkXError) as e:
+    except (KeyError, TypeError, AttributeError, ValueError, nx.NetworkXError) as e:
         raise ToolboxError(f"not a node-link relation graph: {e!r}") from None
     return nx.MultiDiGraph(G)
 

@@ -164,9 +164,9 @@ def bfs(
 
 
 def _unpack(item: tuple) -> tuple[Any, Any, float]:
-    if len(item) == 3:
+    if isinstance(item, tuple) and len(item) == 3:
         return item[0], item[1], float(item[2])
-    if len(item) == 2:
+    if isinstance(item, tuple) and len(item) == 2:
         return item[0], item[1], 1.0
     raise ToolboxError(f"successors must yield (action, state[, cost]) tuples, got {item!r}")
 
