@@ -1,0 +1,206 @@
+"""The robot executor (sim.executor) on a minimal scene: a table and a few free cubes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+import trimesh
+
+_SHARED = Path(__file__).resolve().parents[3] / "shared" / "menagerie"
+if _SHARED.is_dir():
+    os.environ.setdefault("MENAGERIE_ROOT", str(_SHARED))
+
+from contracts import se3  # noqa: E402
+from contracts.errors import UsageError  # noqa: E402
+from sim import robot  # noqa: E402
+from sim._exec_errors import ExecutionError  # noqa: E402
+from sim.executor import Executor, ExecutorConfig  # noqa: E402
+
+SIZE = 0.04
+CUBE = trimesh.creation.box((SIZE,) * 3)
+CUBE_SYMS = se3.cube_group()
+
+
+def _at(x: float, y: float, z: float = SIZE / 2, yaw: float = 0.0) -> np.ndarray:
+    T = se3.rot_z(yaw)
+    T[:3, 3] = [x, y, z]
+    return T
+
+
+def cube_scene(
+    cubes: dict[str, tuple[float, float, float]],
+) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """Table top at z = 0, one free 40 mm cube per entry (x, y, yaw), the robot parked."""
+    spec = mujoco.MjSpec()
+    spec.option.timestep = 0.002
+    spec.worldbody.add_geom(
+        name="table",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[0.65, 0.75, 0.025],
+        pos=[0.35, 0.0, -0.025],
+        friction=[0.8, 0.005, 0.0001],
+    )
+    for name, (x, y, yaw) in cubes.items():
+        body = spec.worldbody.add_body(
+            name=name, pos=[x, y, SIZE / 2], quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)]
+        )
+        body.add_freejoint()
+        body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[SIZE / 2] * 3,
+            mass=0.045,
+            friction=[0.8, 0.005, 0.0001],
+        )
+    robot.attach_robot(spec)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, model.key(robot.PARK_KEY).id)
+    mujoco.mj_forward(model, data)
+    return model, data
+
+
+def _executor(cubes, **kwargs) -> Executor:
+    model, data = cube_scene(cubes)
+    return Executor(model, data, {k: (CUBE, CUBE_SYMS) for k in cubes}, **kwargs)
+
+
+def _speed(ex: Executor, oid: str) -> float:
+    dof = ex.model.jnt_dofadr[ex.model.body_jntadr[ex.bodies[oid]]]
+    return float(np.linalg.norm(ex.data.qvel[dof : dof + 6]))
+
+
+def _gripper_open_and_clear(ex: Executor, oid: str) -> bool:
+    d = ex.data
+    driver = d.qpos[ex.index.driver_qpos]
+    touching = any(ex._pad_contacts(ex._body_geoms[oid]))
+    return bool(np.all(driver < 0.35)) and not touching
+
+
+@pytest.mark.slow
+def test_moves_a_cube_from_a_to_b_and_parks():
+    ex = _executor({"a": (0.5, 0.0, 0.0), "b": (0.42, 0.18, 0.4)})
+    target = _at(0.58, -0.15, yaw=0.6)
+    result = ex.execute(
+        {"status": "ok", "steps": [{"object": "a", "target_pose": target.tolist()}]}
+    )
+    assert result.ok, result.failure
+    step = result.steps[0]
+    assert step.position_error < 0.003
+    assert step.yaw_error < np.radians(2.0)
+    T = ex.object_pose("a")
+    assert se3.within_tolerance(
+        T, target, trans_tol=0.003, rot_tol=np.radians(2), symmetries=CUBE_SYMS
+    )
+    assert _gripper_open_and_clear(ex, "a")
+    assert _speed(ex, "a") < 1e-3 and _speed(ex, "b") < 1e-3  # at rest
+    assert ex.object_pose("b")[:3, 3] == pytest.approx([0.42, 0.18, SIZE / 2], abs=1e-3)
+    arm = ex.data.qpos[ex.index.arm_qpos]
+    assert np.max(np.abs(arm - robot.PARK_QPOS)) < 0.01
+    assert [p for p, _ in step.phases] == [
+        "unpark",
+        "grasp",
+        "approach",
+        "close",
+        "lift",
+        "transfer",
+        "place",
+        "release",
+        "done",
+    ]
+    assert result.sim_time > 0 and result.realtime_factor > 1.0
+    assert not step.weld_engaged
+
+
+@pytest.mark.slow
+def test_stacks_one_cube_on_another_with_the_weld_assist():
+    ex = _executor({"a": (0.45, 0.1, 0.0), "b": (0.55, -0.1, 0.3)}, weld_assist=True)
+    base = ex.object_pose("b")
+    on_top = base @ se3.make(t=[0, 0, SIZE]) @ se3.rot_z(0.2)
+    result = ex.execute([{"object": "a", "target_pose": on_top}])
+    assert result.ok, result.failure
+    assert result.steps[0].weld_engaged
+    assert ex.data.eq_active[ex.index.weld] == 0  # released with the fingers
+    assert se3.within_tolerance(
+        ex.object_pose("a"), on_top, trans_tol=0.003, rot_tol=np.radians(2), symmetries=CUBE_SYMS
+    )
+    assert ex.object_pose("b")[:3, 3] == pytest.approx(base[:3, 3], abs=2e-3)
+
+
+def _failure(ex: Executor, plan):
+    result = ex.execute(plan)
+    assert not result.ok
+    assert result.failure is not None
+    with pytest.raises(ExecutionError) as info:
+        result.raise_for_failure()
+    return result, result.failure, info.value
+
+
+def test_unknown_object_fails_before_anything_moves():
+    ex = _executor({"a": (0.5, 0.0, 0.0)})
+    q0 = ex.data.qpos.copy()
+    plan = [
+        {"object": "a", "target_pose": _at(0.5, 0.1)},
+        {"object": "ghost", "target_pose": _at(0.5, -0.1)},
+    ]
+    _, failure, error = _failure(ex, plan)
+    assert (failure.step, failure.object, failure.kind, failure.phase) == (
+        1,
+        "ghost",
+        "unknown_object",
+        "validate",
+    )
+    assert "'ghost'" in failure.reason and "known: a" in failure.reason
+    assert error.step == 1 and "ghost" in str(error)
+    assert np.max(np.abs(ex.data.qpos[ex.index.arm_qpos] - q0[ex.index.arm_qpos])) < 1e-3
+    assert ex.object_pose("a")[:3, 3] == pytest.approx([0.5, 0.0, SIZE / 2], abs=1e-3)
+
+
+@pytest.mark.parametrize(
+    "pose",
+    [
+        np.diag([1.0, 1.0, -1.0, 1.0]) + se3.make(t=[0.5, 0.1, 0.02]) - np.eye(4),  # a mirror
+        np.diag([2.0, 1.0, 1.0, 1.0]),  # a scale
+        [[1, 0, 0], [0, 1, 0], [0, 0, 1]],  # not 4×4
+        np.full((4, 4), np.nan),
+    ],
+    ids=["mirror", "scale", "3x3", "nan"],
+)
+def test_non_rigid_target_fails_naming_the_step(pose):
+    ex = _executor({"a": (0.5, 0.0, 0.0)})
+    _, failure, _ = _failure(ex, [{"object": "a", "target_pose": pose}])
+    assert (failure.step, failure.object, failure.kind) == (0, "a", "non_rigid_target")
+
+
+@pytest.mark.slow
+def test_unreachable_target_fails_naming_the_step():
+    ex = _executor({"a": (0.5, 0.0, 0.0)})
+    _, failure, _ = _failure(ex, [{"object": "a", "target_pose": _at(1.3, 0.0)}])
+    assert (failure.step, failure.object, failure.kind) == (0, "a", "unreachable")
+    assert "no IK solution" in failure.reason
+    assert ex.object_pose("a")[:3, 3] == pytest.approx([0.5, 0.0, SIZE / 2], abs=1e-3)
+
+
+def test_a_plan_must_be_a_list_of_steps():
+    ex = _executor({"a": (0.5, 0.0, 0.0)})
+    with pytest.raises(UsageError):
+        ex.execute({"status": "infeasible", "reason": "no"})
+    with pytest.raises(UsageError):
+        ex.execute([{"object": "a"}])
+
+
+@pytest.mark.slow
+def test_records_frames_at_the_configured_rate():
+    frames = []
+    ex = _executor(
+        {"a": (0.5, 0.0, 0.0)},
+        record=lambda model, data: frames.append(data.time),
+        config=ExecutorConfig(record_fps=10.0),
+    )
+    result = ex.execute([{"object": "a", "target_pose": _at(0.45, 0.12, yaw=0.3)}])
+    assert result.ok, result.failure
+    assert result.frames == len(frames)
+    assert len(frames) == pytest.approx(result.sim_time * 10.0, abs=2)
