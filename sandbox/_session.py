@@ -10,6 +10,7 @@ budget plus a grace period is killed from here (``timeout``).
 from __future__ import annotations
 
 import abc
+import atexit
 import json
 import os
 import secrets
@@ -17,6 +18,7 @@ import shutil
 import sys
 import tempfile
 import time
+import weakref
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -29,6 +31,13 @@ GRACE_S = 10.0  # [s] on top of a job's budget before the host kills the harness
 START_TIMEOUT_S = 120.0  # [s] for a harness to say hello
 MAX_INPUT = 256 << 20  # [bytes]
 MAX_FIELD = 16_000  # [chars] of any text field in a result header
+_LIVE: weakref.WeakSet[HarnessExecutor] = weakref.WeakSet()
+
+
+@atexit.register
+def _close_all() -> None:  # no container or harness outlives the process that started it
+    for executor in list(_LIVE):
+        executor.close()
 
 
 class ChannelClosed(Exception):
@@ -72,6 +81,7 @@ class HarnessExecutor(Executor):
         self.cold_start_s: float | None = None
         self.restarts = 0
         self._closed = False
+        _LIVE.add(self)
 
     # ------------------------------------------------------------------------ to implement
 

@@ -176,7 +176,7 @@ class Server:
         out_r, out_w = os.pipe()
         err_r, err_w = os.pipe()
         oom_before = _oom_kills()
-        base_rss = _status_kib("VmRSS")
+        base_rss = _status_kib("RssAnon")  # what a forked child starts with, roughly
         sys.stdout.flush()
         sys.stderr.flush()
         t0 = time.monotonic()

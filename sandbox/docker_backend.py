@@ -1,0 +1,249 @@
+"""The Docker backend (the default): one warm, locked-down container per executor.
+
+The container runs the fork-server harness as PID 1; the host talks to it over the container's
+attached stdin/stdout (no `docker exec`, no network, no writable mount). Job files are staged in
+a host directory mounted read-only at /in. Hardening, all by default: no network, read-only root
+file system, size-capped tmpfs /tmp (noexec) and /dev/shm, uid 10001, every capability dropped,
+no-new-privileges, Docker's default seccomp profile, pids/memory (swap = memory)/CPU limits,
+no host environment variables, private IPC, no core dumps, no logging of the channel. Containers
+carry the label ``rivet.sandbox=1`` and their owner; leftovers whose owner is gone are reaped
+whenever an executor starts.
+
+What it does NOT isolate: the host kernel is shared (a kernel exploit is an escape; seccomp and
+dropped capabilities narrow the surface, nothing more); timing and cache side channels; what
+/proc and /sys show about the host (kernel version, CPU model, load, uptime); disk and memory
+bandwidth. Inside the container, a draft can read everything in the image (the harness,
+`contracts`, `toolbox`: public anyway) and the current job's inputs, and it shares its process
+with an entry point run on it (see `sandbox.harness.context`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import socket
+import struct
+from pathlib import Path
+from typing import Any
+
+from sandbox._session import Channel, ChannelClosed, HarnessExecutor
+from sandbox.errors import SandboxUnavailable
+from sandbox.image import LABEL, docker_client, has_image, image_tag
+
+_MUX = struct.Struct(">BxxxI")  # Docker's attach stream header: stream id, payload size
+
+
+class _AttachChannel(Channel):
+    """The container's stdin/stdout over Docker's attach socket (stdout/stderr multiplexed)."""
+
+    def __init__(self, sock: Any) -> None:
+        self.sock = getattr(sock, "_sock", sock)
+        self.sock.setblocking(True)
+        self.buf = bytearray()
+        self.stderr = bytearray()
+
+    def send(self, data: bytes) -> None:
+        self.sock.sendall(data)
+
+    def recv(self, timeout: float) -> bytes:
+        while True:
+            out = self._take()
+            if out:
+                return out
+            if not select.select([self.sock], [], [], max(0.0, timeout))[0]:
+                raise TimeoutError(f"no data within {timeout:.1f} s")
+            data = self.sock.recv(1 << 20)
+            if not data:
+                raise ChannelClosed("the container's output stream ended")
+            self.buf += data
+
+    def _take(self) -> bytes:
+        out = bytearray()
+        while len(self.buf) >= _MUX.size:
+            stream, size = _MUX.unpack_from(self.buf)
+            if len(self.buf) < _MUX.size + size:
+                break
+            payload = self.buf[_MUX.size : _MUX.size + size]
+            del self.buf[: _MUX.size + size]
+            if stream == 2:
+                self.stderr += payload
+                del self.stderr[:-8192]
+            else:
+                out += payload
+        return bytes(out)
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self.sock.shutdown(socket.SHUT_RDWR)
+        self.sock.close()
+
+
+class DockerExecutor(HarnessExecutor):
+    """Runs each job in a fresh forked child inside one warm, hardened container.
+
+    Args:
+        image: image tag (default: the tag of the current repository state; it must exist:
+            `make sandbox-image`).
+        cpus: CPU limit of the container [CPUs].
+        memory_mb: memory limit of the container, harness included; swap is off [MiB].
+        pids_limit: most processes and threads in the container at once.
+        tmpfs_mb: size of the /tmp tmpfs [MiB].
+        preload: heavy modules the harness imports up front ("default", "none" or a,b,c).
+        output_limit_mb: cap on a job's output [MiB].
+    """
+
+    name = "docker"
+
+    def __init__(
+        self,
+        *,
+        image: str | None = None,
+        cpus: float = 1.0,
+        memory_mb: int = 2048,
+        pids_limit: int = 256,
+        tmpfs_mb: int = 256,
+        preload: str = "default",
+        client: Any = None,
+        output_limit_mb: float = 64,
+        tail_bytes: int = 8192,
+    ) -> None:
+        self.client = client or docker_client()
+        self.image = image or image_tag()
+        if not has_image(self.client, self.image):
+            raise SandboxUnavailable(
+                f"the sandbox image {self.image} is missing (the image tag follows its inputs): "
+                "build it with `make sandbox-image` (works offline)"
+            )
+        super().__init__(output_limit_mb=output_limit_mb, tail_bytes=tail_bytes)
+        self.limits = {
+            "cpus": cpus,
+            "memory_mb": memory_mb,
+            "pids_limit": pids_limit,
+            "tmpfs_mb": tmpfs_mb,
+        }
+        self.preload = preload
+        self.container: Any = None
+        self.reaped = reap_leftovers(self.client)
+
+    def container_options(self) -> dict[str, Any]:
+        """The `containers.create` keyword arguments: every hardening setting in one place."""
+        from docker.types import LogConfig, Ulimit
+
+        lim = self.limits
+        return {
+            "command": ["python", "-m", "sandbox.harness.server", "--preload", self.preload],
+            "stdin_open": True,
+            "tty": False,
+            "network_mode": "none",
+            "read_only": True,
+            "user": "10001:10001",
+            "cap_drop": ["ALL"],
+            "security_opt": ["no-new-privileges:true"],
+            "pids_limit": lim["pids_limit"],
+            "mem_limit": f"{lim['memory_mb']}m",
+            "memswap_limit": f"{lim['memory_mb']}m",
+            "nano_cpus": int(lim["cpus"] * 1e9),
+            "tmpfs": {"/tmp": f"rw,nosuid,nodev,noexec,size={lim['tmpfs_mb']}m,mode=1777"},
+            "shm_size": "64m",
+            "ipc_mode": "private",
+            "environment": {},  # none of the host's; the image sets the few the harness keeps
+            "volumes": {str(self.stage_root): {"bind": "/in", "mode": "ro"}},
+            "working_dir": "/tmp",
+            "hostname": "sandbox",
+            "ulimits": [
+                Ulimit(name="core", soft=0, hard=0),
+                Ulimit(name="nofile", soft=1024, hard=1024),
+            ],
+            "log_config": LogConfig(type="none"),
+            "labels": {LABEL: "1", f"{LABEL}.owner": _owner()},
+        }
+
+    def _open(self) -> Channel:
+        import docker
+
+        try:
+            self.container = self.client.containers.create(self.image, **self.container_options())
+            sock = self.container.attach_socket(
+                params={"stdin": 1, "stdout": 1, "stderr": 1, "stream": 1}
+            )
+            self.container.start()
+        except docker.errors.DockerException as e:
+            self._kill()
+            raise SandboxUnavailable(
+                f"cannot start a sandbox container from {self.image}: {e}"
+            ) from None
+        return _AttachChannel(sock)
+
+    def _harness_path(self, staged: Path) -> str:
+        return f"/in/{staged.name}"
+
+    def _kill(self) -> None:
+        import docker
+
+        if self.container is not None:
+            with contextlib.suppress(docker.errors.DockerException):
+                self.container.remove(force=True)
+            self.container = None
+
+    def _death(self) -> tuple[str, str]:
+        import docker
+
+        try:
+            self.container.wait(timeout=10)
+            self.container.reload()
+            state = self.container.attrs["State"]
+        except (docker.errors.DockerException, OSError, AttributeError) as e:
+            return "crashed", f"the sandbox container died ({type(e).__name__}); restarted"
+        if state.get("OOMKilled"):
+            return "oom", "the container ran out of memory and was killed; restarted"
+        return (
+            "crashed",
+            f"the sandbox container died (exit code {state.get('ExitCode')}); restarted",
+        )
+
+    def _diagnostics(self) -> str:
+        channel = self._channel
+        if isinstance(channel, _AttachChannel) and channel.stderr:
+            return "harness stderr: " + channel.stderr.decode(errors="replace")[-2000:]
+        return ""
+
+
+def reap_leftovers(client: Any) -> int:
+    """Remove labelled sandbox containers that stopped or whose owner process is gone."""
+    import docker
+
+    n = 0
+    try:
+        containers = client.containers.list(all=True, filters={"label": f"{LABEL}=1"})
+    except docker.errors.DockerException:
+        return 0
+    for c in containers:
+        owner = c.labels.get(f"{LABEL}.owner", "")
+        if c.status == "running" and _owner_alive(owner):
+            continue
+        with contextlib.suppress(docker.errors.DockerException):
+            c.remove(force=True)
+            n += 1
+    return n
+
+
+def _owner() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}:{_start_time(os.getpid())}"
+
+
+def _owner_alive(owner: str) -> bool:
+    """Whether the process named by an owner label still runs (unknown hosts count as alive)."""
+    host, _, rest = owner.partition(":")
+    pid, _, start = rest.partition(":")
+    if host != socket.gethostname():
+        return bool(owner)
+    return pid.isdigit() and _start_time(int(pid)) == start
+
+
+def _start_time(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return ""

@@ -1,0 +1,244 @@
+"""The isolation probe: an entry point that tests, from inside a job, what a draft can reach.
+
+`rivet sandbox doctor` runs it as ``entry="sandbox.harness.probe:run"``. Every item is tried
+for real (connect, write, open, syscall), not read from configuration, and reports whether the
+sandbox held. Inputs: ``host_paths`` (paths that exist on the host and must not exist here) and
+``canary`` (a value the host put in its own environment that must not appear here).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import errno
+import os
+import socket
+from collections.abc import Callable
+from typing import Any
+
+from .server import ENV_KEEP
+
+_SECRETISH = ("KEY", "TOKEN", "SECRET", "PASSWORD", "CREDENTIAL", "AUTH")
+
+
+def run(ctx: Any) -> dict[str, Any]:
+    """Every probe item as ``{"name", "ok", "detail"}``, in a fixed order."""
+    inputs = dict(ctx.inputs)
+    items = []
+    for name, probe in _PROBES:
+        try:
+            ok, detail = probe(inputs)
+        except Exception as e:
+            ok, detail = False, f"probe failed: {type(e).__name__}: {e}"
+        items.append({"name": name, "ok": bool(ok), "detail": str(detail)[:300]})
+    return {"items": items}
+
+
+def _fails(fn: Callable[[], Any]) -> tuple[bool, str]:
+    try:
+        fn()
+    except OSError as e:
+        return True, f"{type(e).__name__}: {e.strerror or e}"
+    return False, "succeeded"
+
+
+def _network(_: dict[str, Any]) -> tuple[bool, str]:
+    results = []
+    for host in ("1.1.1.1", "8.8.8.8", "172.17.0.1"):
+        ok, why = _fails(lambda h=host: socket.create_connection((h, 53), timeout=1).close())
+        results.append((ok, f"{host}:53 {why}"))
+    ifaces = sorted(os.listdir("/sys/class/net"))
+    only_lo = ifaces == ["lo"]
+    return all(ok for ok, _ in results) and only_lo, f"interfaces {ifaces}; " + "; ".join(
+        w for _, w in results
+    )
+
+
+def _dns(_: dict[str, Any]) -> tuple[bool, str]:
+    return _fails(lambda: socket.getaddrinfo("deb.debian.org", 80))
+
+
+def _root_fs(_: dict[str, Any]) -> tuple[bool, str]:
+    out = []
+    for path in ("/etc/rivet-probe", "/opt/rivet/lib/probe.py", "/usr/local/probe"):
+        ok, why = _fails(lambda p=path: open(p, "w").close())
+        out.append((ok, f"{path}: {why}"))
+    return all(ok for ok, _ in out), "; ".join(w for _, w in out)
+
+
+def _tmpfs(_: dict[str, Any]) -> tuple[bool, str]:
+    mounts = {}
+    with open("/proc/mounts") as f:
+        for line in f:
+            _dev, mnt, kind, opts, *_ = line.split()
+            mounts[mnt] = (kind, opts)
+    kind, opts = mounts.get("/tmp", ("?", ""))
+    st = os.statvfs("/tmp")
+    size_mb = st.f_blocks * st.f_frsize / (1 << 20)
+    ok = kind == "tmpfs" and "noexec" in opts.split(",") and size_mb <= 4096
+    return ok, f"/tmp is {kind} ({opts}), {size_mb:.0f} MiB"
+
+
+def _inputs_ro(_: dict[str, Any]) -> tuple[bool, str]:
+    return _fails(lambda: open("/in/probe", "w").close())
+
+
+def _user(_: dict[str, Any]) -> tuple[bool, str]:
+    ids = (os.getuid(), os.geteuid(), os.getgid(), os.getegid())
+    return 0 not in ids, f"uid/euid/gid/egid = {ids}"
+
+
+def _status() -> dict[str, str]:
+    with open("/proc/self/status") as f:
+        return dict(line.rstrip("\n").split(":\t", 1) for line in f if ":\t" in line)
+
+
+def _caps(_: dict[str, Any]) -> tuple[bool, str]:
+    st = _status()
+    caps = {k: st.get(k, "?") for k in ("CapInh", "CapPrm", "CapEff", "CapBnd", "CapAmb")}
+    return all(v.strip("0") == "" for v in caps.values()), str(caps)
+
+
+def _no_new_privs(_: dict[str, Any]) -> tuple[bool, str]:
+    st = _status()
+    return st.get(
+        "NoNewPrivs"
+    ) == "1", f"NoNewPrivs={st.get('NoNewPrivs')} Seccomp={st.get('Seccomp')}"
+
+
+def _seccomp(_: dict[str, Any]) -> tuple[bool, str]:
+    mode = _status().get("Seccomp")
+    return mode == "2", f"Seccomp mode {mode} (2 = filter)"
+
+
+def _cgroup(*names: str) -> str | None:
+    for name in names:
+        try:
+            with open(f"/sys/fs/cgroup/{name}") as f:
+                return f.read().strip()
+        except OSError:
+            continue
+    return None
+
+
+def _pids(_: dict[str, Any]) -> tuple[bool, str]:
+    value = _cgroup("pids.max", "pids/pids.max")
+    return value is not None and value.isdigit(), f"pids.max = {value}"
+
+
+def _memory(_: dict[str, Any]) -> tuple[bool, str]:
+    limit = _cgroup("memory.max", "memory/memory.limit_in_bytes")
+    swap = _cgroup("memory.swap.max")
+    memsw = _cgroup("memory/memory.memsw.limit_in_bytes")
+    ok = limit is not None and limit.isdigit() and int(limit) < 1 << 50
+    if swap is not None:
+        ok = ok and swap == "0"
+    elif memsw is not None:
+        ok = ok and memsw == limit
+    return ok, f"memory limit {limit}, swap.max {swap}, memsw {memsw}"
+
+
+def _cpu(_: dict[str, Any]) -> tuple[bool, str]:
+    v2 = _cgroup("cpu.max")
+    if v2 is not None:
+        return not v2.startswith("max"), f"cpu.max = {v2}"
+    quota = _cgroup("cpu/cpu.cfs_quota_us", "cpu,cpuacct/cpu.cfs_quota_us")
+    period = _cgroup("cpu/cpu.cfs_period_us", "cpu,cpuacct/cpu.cfs_period_us")
+    ok = quota is not None and quota.lstrip("-").isdigit() and int(quota) > 0
+    return ok, f"cfs quota {quota} / period {period} us"
+
+
+def _env(inputs: dict[str, Any]) -> tuple[bool, str]:
+    canary = str(inputs.get("canary", ""))
+    extra = sorted(set(os.environ) - set(ENV_KEEP) - {"HOME", "TMPDIR"})
+    secretish = sorted(k for k in os.environ if any(s in k.upper() for s in _SECRETISH))
+    with open("/proc/self/environ", "rb") as f:
+        initial = f.read()
+    leaked = bool(canary) and (canary in str(dict(os.environ)) or canary.encode() in initial)
+    ok = not extra and not secretish and not leaked
+    return (
+        ok,
+        f"variables {sorted(os.environ)}; unexpected {extra}; secret-like {secretish}; canary seen: {leaked}",
+    )
+
+
+def _docker_socket(_: dict[str, Any]) -> tuple[bool, str]:
+    paths = ["/var/run/docker.sock", "/run/docker.sock", "/run/containerd/containerd.sock"]
+    present = [p for p in paths if os.path.exists(p)]
+    with open("/proc/net/unix") as f:
+        named = [line.split()[-1] for line in f.readlines()[1:] if len(line.split()) >= 8]
+    dockerish = [n for n in named if "docker" in n or "containerd" in n]
+    return not present and not dockerish, f"present {present}; docker-like unix sockets {dockerish}"
+
+
+def _host_files(inputs: dict[str, Any]) -> tuple[bool, str]:
+    seen = [p for p in inputs.get("host_paths", []) if os.path.exists(p)]
+    home = [p for p in ("/root", "/home") if os.path.isdir(p) and _listable(p)]
+    return not seen and not home, f"host paths visible: {seen}; home dirs listable: {home}"
+
+
+def _listable(path: str) -> bool:
+    try:
+        return bool(os.listdir(path))
+    except OSError:
+        return False
+
+
+def _harness_memory(_: dict[str, Any]) -> tuple[bool, str]:
+    out = []
+    for path in ("/proc/1/environ", "/proc/1/mem", "/proc/1/fd/0", "/proc/1/fd/1"):
+        ok, why = _fails(lambda p=path: open(p, "rb").close())
+        out.append((ok, f"{path}: {why}"))
+    return all(ok for ok, _ in out), "; ".join(w for _, w in out)
+
+
+def _syscall(name: str, *args: Any) -> tuple[int, int]:
+    libc = ctypes.CDLL(None, use_errno=True)
+    fn = getattr(libc, name)
+    rc = fn(*args)
+    return rc, ctypes.get_errno()
+
+
+def _ptrace(_: dict[str, Any]) -> tuple[bool, str]:
+    rc, err = _syscall("ptrace", ctypes.c_long(16), ctypes.c_long(1), None, None)  # ATTACH to 1
+    if rc == 0:
+        _syscall("ptrace", ctypes.c_long(17), ctypes.c_long(1), None, None)  # DETACH
+    return rc != 0, f"ptrace(PTRACE_ATTACH, 1) -> {rc} ({errno.errorcode.get(err, err)})"
+
+
+def _mount(_: dict[str, Any]) -> tuple[bool, str]:
+    rc, err = _syscall("mount", b"none", b"/tmp", b"tmpfs", ctypes.c_ulong(0), None)
+    return rc != 0, f"mount(tmpfs, /tmp) -> {rc} ({errno.errorcode.get(err, err)})"
+
+
+def _signal_harness(_: dict[str, Any]) -> tuple[bool, str]:
+    import signal
+
+    if os.getppid() != 1:  # never signal PID 1 outside the container (the local backend)
+        return False, "not inside the sandbox container (the parent is not PID 1); skipped"
+    os.kill(1, signal.SIGKILL)  # a no-op for PID 1 of the namespace, which has no handler
+    os.kill(1, signal.SIGTERM)
+    alive = os.path.exists("/proc/1/stat")
+    return alive, f"harness (PID 1) alive after SIGKILL and SIGTERM from the job: {alive}"
+
+
+_PROBES: list[tuple[str, Callable[[dict[str, Any]], tuple[bool, str]]]] = [
+    ("network unreachable", _network),
+    ("DNS unavailable", _dns),
+    ("root file system read-only", _root_fs),
+    ("/tmp is a capped noexec tmpfs", _tmpfs),
+    ("inputs mounted read-only", _inputs_ro),
+    ("user is not root", _user),
+    ("capabilities empty", _caps),
+    ("no-new-privileges", _no_new_privs),
+    ("seccomp filter active", _seccomp),
+    ("pids limit", _pids),
+    ("memory limit, no swap", _memory),
+    ("CPU limit", _cpu),
+    ("environment clean", _env),
+    ("docker socket absent", _docker_socket),
+    ("host files absent", _host_files),
+    ("harness memory and channel unreachable", _harness_memory),
+    ("ptrace denied", _ptrace),
+    ("mount denied", _mount),
+    ("harness survives signals", _signal_harness),
+]
