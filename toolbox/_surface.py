@@ -56,13 +56,14 @@ def signed_distance(mesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     def build():
         scene = o3d.t.geometry.RaycastingScene()
         tm = o3d.t.geometry.TriangleMesh()
-        tm.vertex.positions = o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32))
-        tm.triangle.indices = o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.int32))
+        # Tensor(array) copies; from_numpy would alias a temporary.
+        tm.vertex.positions = o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32))  # type: ignore[call-overload]
+        tm.triangle.indices = o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.int32))  # type: ignore[call-overload]
         scene.add_triangles(tm)
         return (scene,)
 
     (scene,) = _cached(_SCENES, key, mesh, build)
-    q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
+    q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))  # type: ignore[call-overload]
     sd = scene.compute_signed_distance(q).numpy().astype(float)
     normals = scene.compute_closest_points(q)["primitive_normals"].numpy().astype(float)
     return sd, normals

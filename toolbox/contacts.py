@@ -31,7 +31,7 @@ TABLE = "table"
 
 def world_bounds(mesh, pose: object) -> np.ndarray:
     """Axis-aligned world bounds (2, 3) [m] — rows (min xyz, max xyz) — of a posed mesh."""
-    V = posed(np.asarray(mesh.vertices, dtype=float), pose)
+    V = posed(np.asarray(mesh.vertices, dtype=float), np.asarray(pose, dtype=float))
     return np.stack([V.min(axis=0), V.max(axis=0)])
 
 
@@ -152,7 +152,7 @@ def _items(
     out = []
     for i, r in enumerate(records):
         key = r.get("mesh") if isinstance(r, Mapping) else None
-        if key not in meshes:
+        if key is None or key not in meshes:
             known = ", ".join(sorted(map(str, meshes))) or "(none)"
             raise ToolboxError(f"records[{i}].mesh {key!r} is not a known mesh; known: {known}")
         T = np.asarray(r.get("pose"), dtype=float)

@@ -143,13 +143,14 @@ def fit_polygon_pose(
     if len(C) > 240:
         C = C[np.linspace(0, len(C), 240, endpoint=False).astype(int)]
     period = 2 * np.pi / n
-    best = None
+    best: tuple[np.ndarray, float, bool] | None = None
     for mirrored in (False, True) if allow_mirror else (False,):
         T = V * [1.0, -1.0] if mirrored else V
         fit = _fit_one(T, C, period, n_starts)
         # A mirrored fit must be clearly better: for mirror-symmetric pieces both fit equally.
         if best is None or fit[1] < 0.9 * best[1]:
             best = (*fit, mirrored)
+    assert best is not None  # at least the plain template was fitted
     (x, y, angle), rmse, mirrored = best
     T = V * [1.0, -1.0] if mirrored else V
     posed = T @ _rot(angle).T + [x, y]
@@ -163,7 +164,9 @@ def fit_polygon_pose(
     )
 
 
-def _fit_one(T: np.ndarray, C: np.ndarray, period: float, n_starts: int):
+def _fit_one(
+    T: np.ndarray, C: np.ndarray, period: float, n_starts: int
+) -> tuple[np.ndarray, float]:
     """Best ((x, y, angle), rmse) of template T against outline C."""
     samples = _sample_boundary(T, 120)
     c_t, c_o = _area_centroid(T), _area_centroid(C)
@@ -182,12 +185,13 @@ def _fit_one(T: np.ndarray, C: np.ndarray, period: float, n_starts: int):
         p = np.array([t[0], t[1], a])
         starts.append((float(np.mean(residuals(p) ** 2)), p))
     starts.sort(key=lambda s: s[0])
-    best = None
+    best: tuple[np.ndarray, float] | None = None
     for _, p0 in starts[:3]:
         sol = least_squares(residuals, p0, method="lm", x_scale="jac")
         rmse = float(np.sqrt(np.mean(sol.fun**2)))
         if best is None or rmse < best[1]:
             best = (sol.x, rmse)
+    assert best is not None  # starts is never empty
     return best
 
 

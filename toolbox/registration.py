@@ -156,16 +156,17 @@ def register_mesh_to_points(
     for S in cube_symmetries():
         R = S[:3, :3]
         starts.append(make_pose(R, model_centre - R @ centroid))
-    coarse = []
+    coarse: list[tuple[float, float, int, np.ndarray]] = []
     for T0 in starts:
         T, fitness, rmse = _icp.icp(coarse_obs, model, T0, 3 * dist, 20, tree=tree)
         coarse.append((-fitness, rmse, len(coarse), T))
     coarse.sort(key=lambda c: c[:3])
-    best = None
+    best: tuple[np.ndarray, float, float] | None = None
     for *_, T0 in coarse[:4]:
         T, fitness, rmse = _icp.icp(obs, model, T0, dist, 50, tree=tree, normals=model_normals)
         if best is None or (fitness, -rmse) > (best[1], -best[2]):
             best = (T, fitness, rmse)
+    assert best is not None  # coarse holds at least the global-registration hypothesis
     T, fitness, rmse = best
     return RegistrationResult(transform=invert_pose(T), fitness=fitness, rmse=rmse)
 

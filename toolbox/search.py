@@ -100,7 +100,7 @@ def astar(
     tie = itertools.count()
     k0 = key(start)
     best_g = {k0: 0.0}
-    parent: dict[Hashable, tuple[Hashable, Any, Any] | None] = {k0: None}
+    parent: dict[Hashable, tuple[Hashable, Any] | None] = {k0: None}
     states = {k0: start}
     frontier = [(h(start), next(tie), 0.0, k0)]
     expanded = 0

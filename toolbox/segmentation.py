@@ -155,7 +155,7 @@ def clean_mask(
 ) -> np.ndarray:
     """Morphological clean-up of a bool mask (H, W): opening removes specks up to `open_px`
     pixels wide, closing bridges gaps up to `close_px`; `fill_holes` fills enclosed holes."""
-    m = check_image(mask, None, "mask", ndim=2).astype(np.uint8)
+    m: np.ndarray = check_image(mask, None, "mask", ndim=2).astype(np.uint8)
     if open_px > 0:
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * open_px + 1,) * 2)
         m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
@@ -217,7 +217,7 @@ def _hue_peaks(hue: np.ndarray, weight: np.ndarray, tolerance: float) -> np.ndar
 
 def _region(mask: np.ndarray, rgb: object, hue: np.ndarray) -> Region:
     v, u = np.nonzero(mask)
-    img = _rgb(rgb)
+    mean = _rgb(rgb)[mask].mean(axis=0)
     h = np.deg2rad(hue[mask])
     mean_hue = float(np.rad2deg(np.arctan2(np.sin(h).mean(), np.cos(h).mean())) % 360.0)
     return Region(
@@ -225,6 +225,6 @@ def _region(mask: np.ndarray, rgb: object, hue: np.ndarray) -> Region:
         area=len(u),
         centroid=(float(u.mean()), float(v.mean())),
         bbox=(int(u.min()), int(v.min()), int(u.max()), int(v.max())),
-        mean_rgb=tuple(float(c) for c in img[mask].mean(axis=0)),
+        mean_rgb=(float(mean[0]), float(mean[1]), float(mean[2])),
         hue=mean_hue,
     )
