@@ -441,8 +441,11 @@ class Executor:
         if not report.grasps:
             raise _StepAbort("no_grasp", "grasp", f"no feasible top-down grasp: {report.summary()}")
         tops = [float(_world_vertices(o.mesh, o.pose)[:, 2].max()) for o in others]
+        candidates, unreachable = self._rank_by_wrist(report.grasps)
+        if not candidates:
+            raise _StepAbort("unreachable", "grasp", unreachable)
         first_failure: PlanFailure | None = None
-        for grasp in report.grasps[: self.config.max_grasp_candidates]:
+        for grasp in candidates[: self.config.max_grasp_candidates]:
             transfer_z = self._transfer_height(oid, grasp, T_pick, tops)
             segments = self._pick_segments(grasp, transfer_z)
             nominal_place = self._place_motion(grasp, grasp.place_tcp, transfer_z)
@@ -455,8 +458,32 @@ class Executor:
         raise _StepAbort(
             "unreachable",
             "grasp",
-            f"{first_failure.describe()} (best of {min(len(report.grasps), self.config.max_grasp_candidates)} grasps)",
+            f"{first_failure.describe()} (best of {min(len(candidates), self.config.max_grasp_candidates)} grasps)",
         )
+
+    def _rank_by_wrist(self, grasps: Sequence[Grasp]) -> tuple[list[Grasp], str]:
+        """Drop grasps whose pick or place pose has no IK solution; among equally good ones
+        prefer the wrist angle farthest from its limits (the 2F-85's half-turn symmetry gives
+        two wrist angles per grasp)."""
+        lo, hi = self.index.arm_range[6]
+        ranked, reason = [], ""
+        for g in grasps[: 4 * self.config.max_grasp_candidates]:
+            margins = []
+            for where, T in (("grasp", g.pick_tcp), ("place", g.place_tcp)):
+                seed = robot.READY_QPOS.copy()
+                seed[0] = np.arctan2(T[1, 3], T[0, 3])
+                sol = self.ik.solve(T, seed)
+                if not sol.ok:
+                    reason = reason or (
+                        f"no IK solution at the {where} pose {np.round(T[:3, 3], 3).tolist()} "
+                        f"(off by {sol.position_error * 1000:.0f} mm)"
+                    )
+                    break
+                margins.append(min(sol.q[6] - lo, hi - sol.q[6]))
+            else:
+                ranked.append((round(g.score, 3), min(margins), g))
+        ranked.sort(key=lambda r: (-r[0], -r[1]))
+        return [r[2] for r in ranked], reason
 
     def _transfer_height(
         self, oid: str, grasp: Grasp, T_pick: np.ndarray, tops: Sequence[float]

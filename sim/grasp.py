@@ -32,32 +32,45 @@ YAW_ONLY_TOL = np.radians(3.0)  # pick → place must be a rotation about the ve
 class FingerModel:
     """Boxes around the 2F-85's fingers and palm, in the TCP frame [m].
 
-    Each finger spans `finger_half_width` across the closing direction, `finger_depth` outwards
-    from the pad's contact face and `finger_length` back from its tip towards the palm; the palm
-    (couplers, drivers, base and everything above) spans `palm_half` in x and y above that.
+    Measured from the menagerie model's collision geometry over the whole stroke. Each finger
+    is a stack of boxes, `segments`, given as (from, to) height above the fingertip, how far
+    the finger reaches outwards beyond its pad's contact face, and its half width across the
+    closing direction. From `linkage_from` up to `palm_from` the couplers and drivers reach out
+    to at least `linkage_outer` from the centre line (they splay as the jaws close); above
+    that the palm and the arm fill `palm_half`.
     """
 
-    finger_half_width: float = 0.012
-    finger_depth: float = 0.033
-    finger_length: float = 0.060
-    palm_half: tuple[float, float] = (0.038, 0.076)
+    segments: tuple[tuple[float, float, float, float], ...] = (
+        (0.000, 0.040, 0.017, 0.012),
+        (0.040, 0.060, 0.033, 0.017),
+    )
+    linkage_from: float = 0.060
+    linkage_outer: float = 0.070
+    linkage_depth: float = 0.033
+    linkage_half_width: float = 0.020
+    palm_from: float = 0.120
+    palm_half: tuple[float, float] = (0.045, 0.076)
     clearance: float = 0.008  # jaw opening beyond the object's width, per side, for approach
     min_clearance: float = 0.0025  # the least per-side opening allowed for wide objects
     tip_margin: float = 0.003  # fingertips stay this far above whatever is below them
     min_contact: float = 0.008  # the least pad contact height accepted [m]
+    high_contact: float = 0.015  # contact height of the alternative grasp high on a face [m]
 
     def boxes(self, gap: float, tip: float, margin: float) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Boxes (centre (3,), half extents (3,)) in the TCP frame for jaws `gap` apart with
-        fingertips at depth `tip`, inflated by `margin`; the palm box reaches 1 m back."""
+        """Boxes (centre (3,), half extents (3,)) in the TCP frame (z towards the fingertips)
+        for jaws `gap` apart with the fingertips at depth `tip`, inflated by `margin`; the palm
+        box reaches 1 m back."""
         out = []
-        half_w, depth, length = self.finger_half_width, self.finger_depth, self.finger_length
-        for side in (-1.0, 1.0):
-            y0 = gap / 2
-            centre = np.array([0.0, side * (y0 + depth / 2), tip - length / 2])
-            half = np.array([half_w, depth / 2, length / 2]) + margin
-            out.append((centre, half))
-        palm_top, palm_bottom = tip - length - 1.0, tip - length
-        centre = np.array([0.0, 0.0, 0.5 * (palm_top + palm_bottom)])
+        y0 = gap / 2
+        layers = [(lo, hi, y0, y0 + depth, hw) for lo, hi, depth, hw in self.segments]
+        outer = max(y0 + self.linkage_depth, self.linkage_outer)
+        layers.append((self.linkage_from, self.palm_from, y0, outer, self.linkage_half_width))
+        for lo, hi, y_in, y_out, hw in layers:
+            for side in (-1.0, 1.0):
+                centre = np.array([0.0, side * (y_in + y_out) / 2, tip - (lo + hi) / 2])
+                half = np.array([hw, (y_out - y_in) / 2, (hi - lo) / 2]) + margin
+                out.append((centre, half))
+        centre = np.array([0.0, 0.0, tip - self.palm_from - 0.5])
         half = np.array([self.palm_half[0], self.palm_half[1], 0.5]) + margin
         out.append((centre, half))
         return out
@@ -283,13 +296,12 @@ def _face_pairs(
             if width > max_width:
                 rejected["too wide"] = rejected.get("too wide", 0) + 1
                 continue
-            pair = _contact_patch(n, width, tri_a, tri_b, obj_tris, bottom, com, fingers, table)
-            if pair is None:
+            found = _contact_patch(n, width, tri_a, tri_b, obj_tris, bottom, com, fingers, table)
+            if not found:
                 rejected["too small a contact patch"] = (
                     rejected.get("too small a contact patch", 0) + 1
                 )
-                continue
-            pairs.append(pair)
+            pairs.extend(found)
     return pairs
 
 
@@ -303,9 +315,10 @@ def _contact_patch(
     com: np.ndarray,
     fingers: FingerModel,
     table: GripperTable,
-) -> _FacePair | None:
-    """Where the pads touch a face pair: the overlap of both faces seen along `n`, as low as the
-    fingers may go, centred on the object's centre of mass where the overlap allows."""
+) -> list[_FacePair]:
+    """Where the pads may touch a face pair: the overlap of both faces seen along `n`, as low
+    as the fingers may go (and, as an alternative, high on the faces), centred on the object's
+    centre of mass where the overlap allows."""
     u_axis = np.cross(np.array([0.0, 0.0, 1.0]), n)
 
     def to2d(tris: np.ndarray) -> np.ndarray:
@@ -315,50 +328,55 @@ def _contact_patch(
     lo = np.maximum(a2.reshape(-1, 2).min(0), b2.reshape(-1, 2).min(0))
     hi = np.minimum(a2.reshape(-1, 2).max(0), b2.reshape(-1, 2).max(0))
     if np.any(hi - lo < fingers.min_contact * 0.5):
-        return None
+        return []
     step = 0.001
     us = np.arange(lo[0] + step / 2, hi[0], step)
     zs = np.arange(lo[1] + step / 2, hi[1], step)
     if len(us) == 0 or len(zs) == 0:
-        return None
+        return []
     grid = np.stack(np.meshgrid(us, zs), axis=-1).reshape(-1, 2)
     mask = (_point_in_triangles(grid, a2) & _point_in_triangles(grid, b2)).reshape(len(zs), len(us))
     rows = np.flatnonzero(mask.any(axis=1))
     if len(rows) == 0:
-        return None
+        return []
     z_lo = max(float(zs[rows[0]]) - step / 2, bottom) + fingers.tip_margin
     z_hi = float(zs[rows[-1]]) + step / 2
     if z_hi - z_lo < fingers.min_contact:
-        return None
-    z_top = min(z_hi, z_lo + table.pad_height)
-    band = (zs >= z_lo) & (zs <= z_top)
-    cols = mask[band].all(axis=0)
-    if not cols.any():
-        return None
-    # The contiguous run of columns nearest the centre of mass.
-    u_com = float(com @ u_axis)
-    runs, start = [], None
-    for i, c in enumerate([*cols, False]):
-        if c and start is None:
-            start = i
-        elif not c and start is not None:
-            runs.append((float(us[start]) - step / 2, float(us[i - 1]) + step / 2))
-            start = None
-    u0, u1 = min(
-        runs,
-        key=lambda r: 0.0 if r[0] <= u_com <= r[1] else min(abs(r[0] - u_com), abs(r[1] - u_com)),
-    )
-    half_pad = table.pad_width / 2
-    u_c = (
-        (u0 + u1) / 2
-        if u1 - u0 <= 2 * half_pad
-        else float(np.clip(u_com, u0 + half_pad, u1 - half_pad))
-    )
-    area = min(u1 - u0, table.pad_width) * (z_top - z_lo)
+        return []
+    # The lowest grip covers most of the face; a grip high on the face keeps the fingers'
+    # linkage above a tall neighbour.
+    heights = [z_lo]
+    if z_hi - fingers.high_contact > z_lo + 0.005:
+        heights.append(z_hi - fingers.high_contact)
     mid_plane = 0.5 * (np.mean(tri_a.reshape(-1, 3) @ n) + np.mean(tri_b.reshape(-1, 3) @ n))
-    centre = u_c * u_axis + mid_plane * n
-    centre[2] = z_lo
-    return _FacePair(closing=n, width=width, centre=centre, tip_z=z_lo, contact_area=area)
+    u_com = float(com @ u_axis)
+    half_pad = table.pad_width / 2
+    out = []
+    for z_tip in heights:
+        z_top = min(z_hi, z_tip + table.pad_height)
+        band = (zs >= z_tip) & (zs <= z_top)
+        cols = mask[band].all(axis=0)
+        if not cols.any():
+            continue
+        # The contiguous run of columns nearest the centre of mass.
+        runs, start = [], None
+        for i, c in enumerate([*cols, False]):
+            if c and start is None:
+                start = i
+            elif not c and start is not None:
+                runs.append((float(us[start]) - step / 2, float(us[i - 1]) + step / 2))
+                start = None
+        u0, u1 = min(runs, key=lambda r: max(r[0] - u_com, u_com - r[1], 0.0))
+        u_c = (
+            (u0 + u1) / 2
+            if u1 - u0 <= 2 * half_pad
+            else float(np.clip(u_com, u0 + half_pad, u1 - half_pad))
+        )
+        centre = u_c * u_axis + mid_plane * n
+        centre[2] = z_tip
+        area = min(u1 - u0, table.pad_width) * (z_top - z_tip)
+        out.append(_FacePair(closing=n, width=width, centre=centre, tip_z=z_tip, contact_area=area))
+    return out
 
 
 def _tcp_pose(closing: np.ndarray, centre_xy: np.ndarray, tcp_z: float) -> np.ndarray:
