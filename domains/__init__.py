@@ -6,6 +6,7 @@ registers itself on import (dm_control style); the built-in ones are imported he
 
 from __future__ import annotations
 
+from domains import cubes  # noqa: F401  (registers itself)
 from domains.base import (
     BENCHMARK_GOALS,
     BENCHMARK_STARTS,
@@ -20,8 +21,6 @@ from domains.base import (
 )
 from domains.errors import DomainError, GenerationError, UnknownDomainError, UnknownObjectError
 from domains.registry import load, names, register
-
-from domains import cubes  # noqa: E402,F401,I001  (registers itself)
 
 __all__ = [
     "BENCHMARK_GOALS",

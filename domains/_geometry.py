@@ -174,7 +174,9 @@ def resting_height(parts: Sequence[ConvexPart], rotation: np.ndarray) -> float:
     return -float(min((p.vertices @ rotation.T)[:, 2].min() for p in parts))
 
 
-def yaw_pose(x: float, y: float, z: float, yaw: float, base: np.ndarray | None = None) -> np.ndarray:
+def yaw_pose(
+    x: float, y: float, z: float, yaw: float, base: np.ndarray | None = None
+) -> np.ndarray:
     """Pose (4, 4) at (x, y, z) [m]: a rotation `yaw` [rad] about world z applied to `base`."""
     c, s = np.cos(yaw), np.sin(yaw)
     t = np.eye(4)

@@ -31,15 +31,11 @@ def records(u: Unit, pose: np.ndarray) -> list[dict]:
     return [{"id": i, "mesh": m, "pose": pose @ rel} for i, m, rel in u.members]
 
 
-def fits(
-    new: Sequence[Body], placed: Sequence[Body], region: Region, clearance: float
-) -> bool:
+def fits(new: Sequence[Body], placed: Sequence[Body], region: Region, clearance: float) -> bool:
     """Inside the region and at least `clearance` [m] from every placed body."""
     if not all(region.contains(b.xy()) for b in new):
         return False
-    return all(
-        body_separation(a, b, cutoff=clearance)[0] >= clearance for a in new for b in placed
-    )
+    return all(body_separation(a, b, cutoff=clearance)[0] >= clearance for a in new for b in placed)
 
 
 def scatter(

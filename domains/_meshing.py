@@ -129,7 +129,11 @@ def prism(poly: np.ndarray, z0: float, z1: float) -> trimesh.Trimesh:
 
 
 def prism_with_knob(
-    poly: np.ndarray, thickness: float, knob_centre: np.ndarray, knob_side: float, knob_height: float
+    poly: np.ndarray,
+    thickness: float,
+    knob_centre: np.ndarray,
+    knob_side: float,
+    knob_height: float,
 ) -> trimesh.Trimesh:
     """A convex CCW polygon extruded to `thickness` with a square knob on its top [m].
 
@@ -141,7 +145,12 @@ def prism_with_knob(
     sq = c + np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
     n, t, top = len(p), thickness, thickness + knob_height
     verts = np.concatenate(
-        [np.c_[p, np.zeros(n)], np.c_[p, np.full(n, t)], np.c_[sq, np.full(4, t)], np.c_[sq, np.full(4, top)]]
+        [
+            np.c_[p, np.zeros(n)],
+            np.c_[p, np.full(n, t)],
+            np.c_[sq, np.full(4, t)],
+            np.c_[sq, np.full(4, top)],
+        ]
     )
     ob, ot, kb, kt = 0, n, 2 * n, 2 * n + 4
     faces = [(ob + c_, ob + b, ob + a) for a, b, c_ in triangulate(p)]

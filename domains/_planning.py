@@ -146,7 +146,10 @@ class Planner:
             if is_done(i) or not all(is_done(s) for s in goal_sup[i]):
                 continue
             for j in movable:
-                if j != i and body_separation(goal_bodies[i], bodies[j], cutoff=0.01)[0] < -self.touch:
+                if (
+                    j != i
+                    and body_separation(goal_bodies[i], bodies[j], cutoff=0.01)[0] < -self.touch
+                ):
                     return j
         # 2. something rests on an object that still has to move
         for j in movable:
@@ -170,7 +173,9 @@ class Planner:
             body = place(i, self.parts[mesh], pose)
             if not self.region.contains(body.xy()):
                 continue
-            if any(body_separation(body, b, cutoff=self.clearance)[0] < self.clearance for b in others):
+            if any(
+                body_separation(body, b, cutoff=self.clearance)[0] < self.clearance for b in others
+            ):
                 continue
             if any(
                 body_separation(body, g, cutoff=self.goal_clearance)[0] < self.goal_clearance
@@ -179,4 +184,3 @@ class Planner:
                 continue
             return pose
         raise GenerationError(f"no free temporary place for {i!r}")
-

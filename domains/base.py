@@ -268,9 +268,7 @@ class Domain:
     @cached_property
     def collision_meshes(self) -> dict[str, list[trimesh.Trimesh]]:
         """Convex parts per mesh key, as meshes (object frame)."""
-        return {
-            k: [_meshing.load(f) for f in m.collision] for k, m in self.mesh_specs.items()
-        }
+        return {k: [_meshing.load(f) for f in m.collision] for k, m in self.mesh_specs.items()}
 
     @cached_property
     def parts(self) -> dict[str, list[ConvexPart]]:
@@ -332,7 +330,11 @@ class Domain:
         )
 
     def record(self, object_id: str, pose: np.ndarray) -> dict:
-        return {"id": object_id, "mesh": self.object(object_id).mesh, "pose": np.asarray(pose, float)}
+        return {
+            "id": object_id,
+            "mesh": self.object(object_id).mesh,
+            "pose": np.asarray(pose, float),
+        }
 
     def scene(self, records: Sequence[Mapping]) -> dict:
         return {"domain": self.name, "objects": [dict(r) for r in records]}
@@ -340,17 +342,27 @@ class Domain:
     def generate(self, seed: int, *, physics: bool = True) -> Instance:
         """A free draw: goal and start both from `seed`."""
         return self._instance(
-            name=f"seed{seed}", seed=seed, goal_key=(seed, 0), goal_index=None,
-            start_key=(seed, 1), physics=physics,
+            name=f"seed{seed}",
+            seed=seed,
+            goal_key=(seed, 0),
+            goal_index=None,
+            start_key=(seed, 1),
+            physics=physics,
         )
 
     def benchmark_instance(self, goal: int, start: int, *, physics: bool = True) -> Instance:
         """Benchmark instance `goal` (1–20, 1 = reference) × `start` (1–3), regenerated."""
         if not (1 <= goal <= BENCHMARK_GOALS and 1 <= start <= BENCHMARK_STARTS):
-            raise ValueError(f"benchmark has goals 1–{BENCHMARK_GOALS}, starts 1–{BENCHMARK_STARTS}")
+            raise ValueError(
+                f"benchmark has goals 1–{BENCHMARK_GOALS}, starts 1–{BENCHMARK_STARTS}"
+            )
         return self._instance(
-            name=benchmark_name(goal, start), seed=None, goal_key=(10_000, goal),
-            goal_index=goal, start_key=(10_000, goal, start), physics=physics,
+            name=benchmark_name(goal, start),
+            seed=None,
+            goal_key=(10_000, goal),
+            goal_index=goal,
+            start_key=(10_000, goal, start),
+            physics=physics,
         )
 
     def _instance(self, *, name, seed, goal_key, goal_index, start_key, physics) -> Instance:
@@ -379,18 +391,22 @@ class Domain:
                 problems.append(f"start draw {attempt}: start equals goal")
                 continue
             return Instance(
-                domain=self.name, name=name, seed=seed, start=self.scene(start),
-                goal=self.scene(goal), order=tuple(order),
+                domain=self.name,
+                name=name,
+                seed=seed,
+                start=self.scene(start),
+                goal=self.scene(goal),
+                order=tuple(order),
             )
         raise GenerationError(f"{self.name} {name}: no valid start; " + "; ".join(problems[-3:]))
 
     def _problems(self, records: Sequence[Mapping], physics: bool) -> list[str]:
-        from sim import settle  # the simulator builds on domains, so import late
+        from sim.settle import geometric_problems, physical_problems  # sim builds on domains
 
         scene = self.scene(records)
-        found = [str(p) for p in settle.geometric_problems(self, scene)]
+        found = [str(p) for p in geometric_problems(self, scene)]
         if not found and physics:
-            found = [str(p) for p in settle.physical_problems(self, scene)]
+            found = [str(p) for p in physical_problems(self, scene)]
         return found
 
     # -- the fixed benchmark ---------------------------------------------------------------

@@ -28,9 +28,7 @@ class UnknownObjectError(UsageError):
         self.what = what
         self.name = name
         self.known = tuple(known)
-        super().__init__(
-            f"{domain}: unknown {what} {name!r}; known: {', '.join(self.known)}"
-        )
+        super().__init__(f"{domain}: unknown {what} {name!r}; known: {', '.join(self.known)}")
 
 
 class GenerationError(DomainError):

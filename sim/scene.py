@@ -39,6 +39,10 @@ OFFSCREEN = (1920, 1080)  # offscreen framebuffer [px]: fits the 1280×720 camer
 TIMESTEP = 0.002  # [s]
 OBJECT_GROUP_VISUAL = 2  # geom group of object visuals (robots use 0 and 1)
 OBJECT_GROUP_COLLISION = 3  # hidden
+# Stiff contacts for objects and table: wooden blocks sink < 0.1 mm per contact, so tall
+# stacks stay within the 2 mm settling criterion (MuJoCo's default sinks ~0.5 mm per contact).
+CONTACT_SOLREF = (0.005, 1.0)
+CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
 
 
 def body_name(object_id: str) -> str:
@@ -195,8 +199,8 @@ def build_spec(domain: Domain, scene: Mapping, *, with_robot: bool = False) -> m
     spec.visual.quality.shadowsize = 2048
     spec.visual.map.znear = 0.01
     spec.visual.map.zfar = 20.0
-    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
-    spec.visual.headlight.diffuse = [0.25, 0.25, 0.25]
+    spec.visual.headlight.ambient = [0.3, 0.3, 0.3]
+    spec.visual.headlight.diffuse = [0.2, 0.2, 0.2]
     spec.visual.headlight.specular = [0.05, 0.05, 0.05]
     spec.stat.extent = 1.0
     spec.stat.center = [0.4, 0.0, 0.1]
@@ -242,7 +246,7 @@ def _world(spec: mujoco.MjSpec) -> None:
         height=512,
     )
     spec.add_material(name="floor", textures=["", "floor"], texrepeat=[6, 6], reflectance=0.0)
-    spec.add_material(name="table", rgba=[0.78, 0.74, 0.68, 1], specular=0.1, shininess=0.1)
+    spec.add_material(name="table", rgba=[0.6, 0.58, 0.55, 1], specular=0.05, shininess=0.05)
     wb = spec.worldbody
     wb.add_geom(
         name="floor",
@@ -258,6 +262,8 @@ def _world(spec: mujoco.MjSpec) -> None:
         pos=[TABLE_CENTRE_X, 0, -TABLE_HALF[2]],
         material="table",
         friction=[0.8, 0.005, 0.0001],
+        solref=list(CONTACT_SOLREF),
+        solimp=list(CONTACT_SOLIMP),
     )
     for sx in (-1, 1):  # table legs, for the eye only
         for sy in (-1, 1):
@@ -278,7 +284,7 @@ def _world(spec: mujoco.MjSpec) -> None:
         type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
         pos=[0.9, 0.5, 1.5],
         dir=[-0.3, -0.35, -1.0],
-        diffuse=[0.55, 0.55, 0.55],
+        diffuse=[0.5, 0.5, 0.5],
         specular=[0.2, 0.2, 0.2],
         castshadow=True,
     )
@@ -326,6 +332,8 @@ def _add_object(spec: mujoco.MjSpec, domain: Domain, o: Mapping) -> None:
             group=OBJECT_GROUP_COLLISION,
             friction=[obj.friction, 0.005, 0.0001],
             rgba=[1, 1, 1, 0],
+            solref=list(CONTACT_SOLREF),
+            solimp=list(CONTACT_SOLIMP),
         )
 
 

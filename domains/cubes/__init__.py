@@ -52,7 +52,9 @@ def structure(kind: str, ids: Sequence[str]) -> Unit:
     if kind == "stack":
         return unit(*((i, "cube", _at(0, 0, SIDE / 2 + SIDE * k)) for k, i in enumerate(ids)))
     if kind == "row":
-        return unit(*((i, "cube", _at((k - (n - 1) / 2) * PITCH, 0, SIDE / 2)) for k, i in enumerate(ids)))
+        return unit(
+            *((i, "cube", _at((k - (n - 1) / 2) * PITCH, 0, SIDE / 2)) for k, i in enumerate(ids))
+        )
     if kind == "pyramid":
         levels = (3, 2, 1) if n == 6 else (2, 1)
         members, k = [], 0
@@ -117,7 +119,9 @@ class Cubes(Domain):
             spots = [
                 g
                 for g in ground
-                if not any(np.linalg.norm(pose[g][:2, 3] - f["pose"][:2, 3]) < 2 * SIDE for f in fixed)
+                if not any(
+                    np.linalg.norm(pose[g][:2, 3] - f["pose"][:2, 3]) < 2 * SIDE for f in fixed
+                )
             ]
             if not spots:
                 break
@@ -127,7 +131,11 @@ class Cubes(Domain):
                 break
             who = movers[int(rng.integers(len(movers)))]
             p = pose[spot][:2, 3] + rng.uniform(-0.01, 0.01, 2)
-            rec = {"id": who, "mesh": "cube", "pose": yaw_pose(*p, SIDE / 2, rng.uniform(-np.pi, np.pi))}
+            rec = {
+                "id": who,
+                "mesh": "cube",
+                "pose": yaw_pose(*p, SIDE / 2, rng.uniform(-np.pi, np.pi)),
+            }
             body = place(who, self.parts["cube"], rec["pose"])
             placed = [place(f["id"], self.parts["cube"], f["pose"]) for f in fixed]
             if _layout.fits([body], placed, self.placement, 0.03):

@@ -1,0 +1,126 @@
+"""RGB-D observations: geometry of the image, the depth sensor model, the folder format."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+import domains
+from sim.errors import InvalidCameraError
+from sim.render import DepthNoise, apply_depth_noise, observe, read_observation, write_observation
+
+
+@pytest.fixture(scope="module", params=domains.names())
+def reference(request):
+    d = domains.load(request.param)
+    return d, d.benchmark()[0]
+
+
+def test_observation_shapes_and_types(reference):
+    d, inst = reference
+    obs = observe(d, inst.goal, "front", mask=True)
+    assert obs["rgb"].shape == (720, 1280, 3) and obs["rgb"].dtype == np.uint8
+    assert obs["depth"].shape == (720, 1280) and obs["depth"].dtype == np.float32
+    assert obs["mask"].dtype == np.int32
+    # every object of the reference goal is visible from the default camera
+    assert set(np.unique(obs["mask"])) - {-1} == set(range(len(inst.goal["objects"])))
+
+
+def test_projection_matches_the_rendered_image(reference):
+    """Each object's visible pixels back-project (with the clean depth) onto its own mesh."""
+    d, inst = reference
+    obs = observe(d, inst.goal, "front", noise=None, mask=True)
+    k, t = obs["camera"]["K"], obs["camera"]["T_world_camera"]
+    for idx, rec in enumerate(inst.goal["objects"]):
+        v, u = np.nonzero(obs["mask"] == idx)
+        if len(u) < 50:
+            continue
+        z = obs["depth"][v, u]
+        rays = np.linalg.inv(k) @ np.stack([u, v, np.ones_like(u)]).astype(float)
+        pts = (t[:3, :3] @ (rays * z) + t[:3, 3:4]).T  # (n, 3) world
+        local = (np.linalg.inv(rec["pose"]) @ np.c_[pts, np.ones(len(pts))].T).T[:, :3]
+        mesh = d.mesh(rec["mesh"])
+        lo, hi = mesh.bounds
+        inside = np.all((local >= lo - 0.002) & (local <= hi + 0.002), axis=1)
+        assert inside.mean() > 0.98, rec["id"]
+
+
+def test_depth_round_trips_through_the_folder_within_1mm(reference, tmp_path):
+    d, inst = reference
+    clean = observe(d, inst.start, "view1", noise=None)
+    back = read_observation(write_observation(clean, tmp_path / "obs"))
+    assert np.array_equal(back["rgb"], clean["rgb"])
+    assert np.array_equal(back["depth"] > 0, clean["depth"] > 0)
+    assert np.abs(back["depth"] - clean["depth"]).max() < 0.001
+    assert np.allclose(back["camera"]["K"], clean["camera"]["K"])
+    assert np.allclose(back["camera"]["T_world_camera"], clean["camera"]["T_world_camera"])
+
+
+def test_noisy_depth_stays_near_the_clean_depth(reference, tmp_path):
+    d, inst = reference
+    clean = observe(d, inst.start, "front", noise=None)
+    noisy = read_observation(write_observation(observe(d, inst.start, "front", seed=3), tmp_path))
+    both = (clean["depth"] > 0) & (noisy["depth"] > 0)
+    err = noisy["depth"][both] - clean["depth"][both]
+    assert abs(err.mean()) < 2e-4
+    assert 0.0008 < err.std() < 0.003  # 1–2 mm of noise, with quantisation
+    assert (noisy["depth"] == 0).mean() > (clean["depth"] == 0).mean()  # missing pixels
+
+
+def test_noise_model():
+    model = DepthNoise()
+    rng = np.random.default_rng(0)
+    z = np.full((200, 200), 0.8, np.float32)
+    z[:, 100:] = 1.2  # a depth edge
+    n = apply_depth_noise(z, rng, model)
+    left, right = n[:, :90], n[:, 110:]
+    assert np.isclose(left[left > 0].std(), model.sigma(0.8), rtol=0.15)
+    assert np.isclose(right[right > 0].std(), model.sigma(1.2), rtol=0.15)
+    assert np.allclose(np.round(n[n > 0] / 0.001) * 0.001, n[n > 0], atol=1e-6)  # 1 mm steps
+    assert (n[:, 99:101] == 0).mean() > 0.5  # missing at the edge
+    assert (left == 0).mean() < 0.01
+    assert np.array_equal(n, apply_depth_noise(z, np.random.default_rng(0), model))
+
+
+def test_observations_are_reproducible(reference):
+    d, inst = reference
+    a = observe(d, inst.goal, "view2", seed=5)
+    b = observe(d, inst.goal, "view2", seed=5)
+    assert np.array_equal(a["rgb"], b["rgb"]) and np.array_equal(a["depth"], b["depth"])
+
+
+def test_camera_dicts_render_like_named_cameras(reference):
+    d, inst = reference
+    cam = d.camera("view1")
+    a = observe(d, inst.goal, "view1", noise=None)
+    b = observe(
+        d,
+        inst.goal,
+        {**cam, "K": cam["K"].tolist(), "T_world_camera": cam["T_world_camera"].tolist()},
+        noise=None,
+    )
+    assert np.array_equal(a["depth"], b["depth"])
+
+
+def test_cameras_mujoco_cannot_render_are_refused():
+    d = domains.load("cubes")
+    inst = d.benchmark()[0]
+    cam = d.camera("front")
+    cam["K"] = cam["K"].copy()
+    cam["K"][0, 2] += 20
+    with pytest.raises(InvalidCameraError, match="principal point"):
+        observe(d, inst.goal, cam)
+
+
+def test_render_time_under_half_a_second():
+    d = domains.load("cubes")
+    inst = d.benchmark()[0]
+    observe(d, inst.start, "front")  # context and model are built once
+    times = []
+    for k in range(3):
+        t0 = time.perf_counter()
+        observe(d, inst.start, "front", seed=k)
+        times.append(time.perf_counter() - t0)
+    assert min(times) < 0.5, times
