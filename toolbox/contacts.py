@@ -1,9 +1,8 @@
 """Physical plausibility from poses and meshes: collisions, resting-on relations, placement.
 
-Design rule: geometric tests on posed meshes, no simulation. Meshes are sampled densely on
-their surface (vertices, edges and faces) and the samples of one object are tested against the
-other's signed distance field (Open3D ray casting), in both directions. Signed distances need
-closed (watertight) meshes. The table is the plane z = `table_height` (default 0, DESIGN.md).
+Design rule: geometric tests on posed meshes, no simulation: points sampled densely on each
+surface (vertices, edges, faces) are tested against the other object's signed distance, in
+both directions, so meshes must be closed (watertight). The table is the plane z = `table_height` (default 0, DESIGN.md).
 Records are `{"id", "mesh", "pose"}` with `pose` = `T_world_object` (4, 4) [m].
 """
 

@@ -122,6 +122,12 @@ def fit_polygon_pose(
             down, like the tangram parallelogram).
         n_starts: initial angles tried within one symmetry period.
 
+    For a flat piece lying on the table, map the outline onto the plane of its top face,
+    `pixels_to_plane(mask_contour(mask), camera, (0, 0, 1, -thickness))[:, :2]`; if
+    `template` is the piece's outline in its object frame (z up), its record pose is
+    `pose_from_xyz_yaw(fit.x, fit.y, z, fit.angle)` (mirrored: that pose @ a rotation of π
+    about the object's x axis, which also turns its z axis down).
+
     Returns:
         PolygonFit. Accuracy is sub-degree for outlines of a few hundred pixels; the fit
         minimises the two-sided distance between the outlines, so a uniform half-pixel

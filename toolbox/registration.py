@@ -117,7 +117,7 @@ def register_mesh_to_points(
     hidden parts of the mesh cost nothing. Hypotheses: FPFH/RANSAC global registration, `init`
     if given, and 24 axis-aligned orientations about the segment's centroid; each is refined
     by ICP and the one explaining most observed points (then lowest rmse) wins.
-    Deterministic for a given `seed`; takes ~0.1–0.5 s.
+    Deterministic for a given `seed`; takes ~0.2–1 s.
 
     Args:
         mesh: trimesh.Trimesh in its canonical object frame [m].

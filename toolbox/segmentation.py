@@ -39,7 +39,7 @@ class Region:
         centroid: (u, v) mean pixel coordinate.
         bbox: (u_min, v_min, u_max, v_max) inclusive.
         mean_rgb: (3,) mean colour 0–255.
-        hue: circular mean hue [deg]; NaN for grey regions.
+        hue: circular mean hue [deg] of its pixels.
     """
 
     mask: np.ndarray
