@@ -126,7 +126,8 @@ def fit_polygon_pose(
     `pixels_to_plane(mask_contour(mask), camera, (0, 0, 1, -thickness))[:, :2]`; if
     `template` is the piece's outline in its object frame (z up), its record pose is
     `pose_from_xyz_yaw(fit.x, fit.y, z, fit.angle)` (mirrored: that pose @ a rotation of π
-    about the object's x axis, which also turns its z axis down).
+    about the object's x axis; its z axis then points down, so a frame origin on the bottom
+    face goes to z = thickness).
 
     Returns:
         PolygonFit. Accuracy is sub-degree for outlines of a few hundred pixels; the fit
