@@ -50,7 +50,8 @@ class FingerModel:
     linkage_half_width: float = 0.020
     palm_from: float = 0.120
     palm_half: tuple[float, float] = (0.045, 0.076)
-    clearance: float = 0.008  # jaw opening beyond the object's width, per side, for approach
+    clearances: tuple[float, ...] = (0.008, 0.004)  # jaw opening beyond the object's width,
+    # per side, for the approach and the release: the first that clears the neighbours is used
     min_clearance: float = 0.0025  # the least per-side opening allowed for wide objects
     tip_margin: float = 0.003  # fingertips stay this far above whatever is below them
     min_contact: float = 0.008  # the least pad contact height accepted [m]
@@ -440,64 +441,77 @@ def plan_grasps(
     pick_sets = [_world_triangles(o.mesh, o.pose) for o in pick_obstacles]
     place_sets = [_world_triangles(o.mesh, o.pose) for o in place_obstacles]
     T_pick_inv = se3.inverse(T_pick)
+    pick_ids = [o.id for o in pick_obstacles]
+    place_ids = [o.id for o in place_obstacles]
     grasps: list[Grasp] = []
+
+    def reject(why: str) -> None:
+        rejected[why] = rejected.get(why, 0) + 1
+
     for pair in pairs:
-        side = (max_width + 0.005 - pair.width) / 2
-        clearance = min(fingers.clearance, side)
-        if clearance < fingers.min_clearance:
-            rejected["too wide"] = rejected.get("too wide", 0) + 1
-            continue
-        open_gap = pair.width + 2 * clearance
-        tip_contact = table.tip_at_gap(pair.width)
-        tip_open = table.tip_at_gap(open_gap)
-        tcp_z = pair.tip_z + tip_contact  # the TCP sits above the fingertips
-        reach = max(tip_contact, tip_open)  # deepest fingertip during approach and closing
         if pair.tip_z < table_z + fingers.tip_margin - 0.001:
-            rejected["fingertips below the table"] = (
-                rejected.get("fingertips below the table", 0) + 1
-            )
+            reject("fingertips below the table")
             continue
+        side = (max_width + 0.005 - pair.width) / 2
+        tip_contact = table.tip_at_gap(pair.width)
+        tcp_z = pair.tip_z + tip_contact  # the TCP sits above the fingertips
         for flip in (1.0, -1.0):
             tcp_pick = _tcp_pose(flip * pair.closing, pair.centre[:2], tcp_z)
-            # The object itself: nothing may stick out into the jaws' path.
-            if _gripper_hits(tcp_pick, pair.width + 0.002, reach, 0.0, [own_pick], fingers) or (
-                _gripper_hits(tcp_pick, open_gap, reach, 0.0, [own_pick], fingers)
-            ):
-                rejected["fingers hit the object itself"] = (
-                    rejected.get("fingers hit the object itself", 0) + 1
-                )
-                break  # the same volumes for both flips
             T_obj_tcp = T_pick_inv @ tcp_pick
             ranked = sorted(options, key=lambda o: abs(o[2]))[:max_symmetries]
             for k, T_place, _dyaw in ranked:
                 tcp_place = T_place @ T_obj_tcp
-                if tcp_place[2, 3] - reach < table_z + fingers.tip_margin - 0.001:
-                    rejected["fingertips below the table at the place"] = (
-                        rejected.get("fingertips below the table at the place", 0) + 1
+                # The widest approach opening that works, from the preferred one down.
+                for clearance in fingers.clearances:
+                    clearance = min(clearance, side)
+                    if clearance < fingers.min_clearance:
+                        reject("too wide")
+                        break
+                    open_gap = pair.width + 2 * clearance
+                    reach = max(tip_contact, table.tip_at_gap(open_gap))  # deepest fingertip
+                    # The object itself: nothing may stick out into the jaws' path.
+                    if _gripper_hits(
+                        tcp_pick, pair.width + 0.002, reach, 0.0, [own_pick], fingers
+                    ) or _gripper_hits(tcp_pick, open_gap, reach, 0.0, [own_pick], fingers):
+                        reject("fingers hit the object itself")
+                        continue
+                    if tcp_place[2, 3] - reach < table_z + fingers.tip_margin - 0.001:
+                        reject("fingertips below the table at the place")
+                        break
+                    margin, hit = _clear_margin(
+                        tcp_pick,
+                        tcp_place,
+                        open_gap,
+                        reach,
+                        pick_sets,
+                        place_sets,
+                        margins,
+                        fingers,
                     )
-                    continue
-                margin = _clear_margin(
-                    tcp_pick, tcp_place, open_gap, reach, pick_sets, place_sets, margins, fingers
-                )
-                if margin is None:
-                    rejected["fingers hit a neighbour"] = (
-                        rejected.get("fingers hit a neighbour", 0) + 1
+                    if margin is None:
+                        where, index = hit
+                        who = pick_ids[index] if where == "pick" else place_ids[index]
+                        reject(f"fingers hit {who!r} at the {where}")
+                        continue
+                    grasps.append(
+                        Grasp(
+                            T_object_tcp=T_obj_tcp,
+                            width=pair.width,
+                            open_gap=open_gap,
+                            symmetry=k,
+                            pick_tcp=tcp_pick,
+                            place_tcp=tcp_place,
+                            contact_area=pair.contact_area,
+                            transfer_yaw=_wrap(
+                                _yaw_of(tcp_place[:3, :3]) - _yaw_of(tcp_pick[:3, :3])
+                            ),
+                            margin=margin,
+                            score=_score(
+                                pair, margin, clearance, tcp_pick, tcp_place, T_pick, mesh
+                            ),
+                        )
                     )
-                    continue
-                grasps.append(
-                    Grasp(
-                        T_object_tcp=T_obj_tcp,
-                        width=pair.width,
-                        open_gap=open_gap,
-                        symmetry=k,
-                        pick_tcp=tcp_pick,
-                        place_tcp=tcp_place,
-                        contact_area=pair.contact_area,
-                        transfer_yaw=_wrap(_yaw_of(tcp_place[:3, :3]) - _yaw_of(tcp_pick[:3, :3])),
-                        margin=margin,
-                        score=_score(pair, margin, tcp_pick, tcp_place, T_pick, mesh),
-                    )
-                )
+                    break
     grasps.sort(key=lambda g: -g.score)
     return GraspReport(grasps=tuple(grasps), rejected=rejected)
 
@@ -511,24 +525,47 @@ def _clear_margin(
     place_sets: Sequence[np.ndarray],
     margins: Sequence[float],
     fingers: FingerModel,
-) -> float | None:
+) -> tuple[float | None, tuple[str, int]]:
+    """The largest margin at which the gripper clears all neighbours at both ends, or None and
+    (where, index) of a neighbour hit at the smallest margin."""
+    hit = ("pick", -1)
     for margin in margins:
-        if not _gripper_hits(tcp_pick, gap, reach, margin, pick_sets, fingers) and not (
-            _gripper_hits(tcp_place, gap, reach, margin, place_sets, fingers)
-        ):
-            return float(margin)
-    return None
+        index = _first_hit(tcp_pick, gap, reach, margin, pick_sets, fingers)
+        if index >= 0:
+            hit = ("pick", index)
+            continue
+        index = _first_hit(tcp_place, gap, reach, margin, place_sets, fingers)
+        if index >= 0:
+            hit = ("place", index)
+            continue
+        return float(margin), hit
+    return None, hit
+
+
+def _first_hit(
+    T_world_tcp: np.ndarray,
+    gap: float,
+    tip: float,
+    margin: float,
+    triangle_sets: Sequence[np.ndarray],
+    fingers: FingerModel,
+) -> int:
+    for i, tris in enumerate(triangle_sets):
+        if _gripper_hits(T_world_tcp, gap, tip, margin, [tris], fingers):
+            return i
+    return -1
 
 
 def _score(
     pair: _FacePair,
     margin: float,
+    clearance: float,
     tcp_pick: np.ndarray,
     tcp_place: np.ndarray,
     T_pick: np.ndarray,
     mesh: trimesh.Trimesh,
 ) -> float:
-    """Higher is better: roomy clearance, a large contact patch, little wrist rotation, a grip
+    """Higher is better: roomy clearance and opening, a large contact patch, little wrist rotation, a grip
     near the centre of mass."""
     com = T_pick[:3, :3] @ np.asarray(mesh.center_mass if mesh.is_volume else mesh.centroid)
     com += T_pick[:3, 3]
