@@ -56,6 +56,7 @@ from toolbox.registration import (
     global_registration,
     icp,
     register_mesh_to_points,
+    register_mesh_to_segment,
 )
 from toolbox.render import compare_renders, overlay_mask, render_scene
 from toolbox.search import SearchResult, astar, bfs, state_key
@@ -133,6 +134,7 @@ __all__ = [
     "project_points",
     "project_to_rotation",
     "register_mesh_to_points",
+    "register_mesh_to_segment",
     "relation_changes",
     "relations_of_type",
     "removal_order",

@@ -16,16 +16,18 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from toolbox import _icp
-from toolbox._common import check_points
+from toolbox._common import check_image, check_points
+from toolbox._visibility import surface_consistency
 from toolbox.errors import ToolboxError
 from toolbox.geometry import cube_symmetries, invert_pose, make_pose
-from toolbox.vision import voxel_downsample
+from toolbox.vision import depth_to_points, voxel_downsample
 
 __all__ = [
     "RegistrationResult",
     "global_registration",
     "icp",
     "register_mesh_to_points",
+    "register_mesh_to_segment",
 ]
 
 
@@ -37,11 +39,14 @@ class RegistrationResult:
         transform: (4, 4) rigid transform taking source points into the target frame.
         fitness: fraction in [0, 1] of source points with a target point within max_distance.
         rmse: root-mean-square inlier distance [m] (inf when there are no inliers).
+        consistency: fraction of the model's visible surface confirmed by the depth image
+            (`register_mesh_to_segment` only; NaN otherwise).
     """
 
     transform: np.ndarray
     fitness: float
     rmse: float
+    consistency: float = float("nan")
 
 
 def icp(
@@ -116,7 +121,9 @@ def register_mesh_to_points(
     partially occluded: the observed points are aligned onto points sampled on the mesh, so
     hidden parts of the mesh cost nothing. Hypotheses: FPFH/RANSAC global registration, `init`
     if given, and 24 axis-aligned orientations about the segment's centroid; each is refined
-    by ICP and the one explaining most observed points (then lowest rmse) wins.
+    by ICP and the one explaining most observed points (then lowest rmse) wins. From a single
+    view several poses can explain the points equally well (the hidden side is free): prefer
+    `register_mesh_to_segment` when you have the depth image and camera.
     Deterministic for a given `seed`; takes ~0.2–1 s.
 
     Args:
@@ -135,6 +142,68 @@ def register_mesh_to_points(
     Raises:
         ToolboxError: fewer than 10 points or an empty mesh.
     """
+    fits, *_ = _hypotheses(mesh, points, init, voxel_size, max_distance, n_samples, seed, keep=4)
+    T, fitness, rmse = max(fits, key=lambda f: (f[1], -f[2]))
+    return RegistrationResult(transform=T, fitness=fitness, rmse=rmse)
+
+
+def register_mesh_to_segment(
+    mesh,
+    depth: object,
+    mask: object,
+    camera: dict,
+    *,
+    init: object = None,
+    voxel_size: float | None = None,
+    max_distance: float | None = None,
+    n_samples: int = 4000,
+    seed: int = 0,
+) -> RegistrationResult:
+    """Estimate the 6D pose `T_world_object` of a mesh from its segment in a depth image.
+
+    Like `register_mesh_to_points` on `depth_to_points(depth, camera, mask)`, but the
+    candidate poses are also checked against what the camera saw: a pose whose camera-facing
+    surface would appear where the depth image shows something farther away, or nothing,
+    is penalised, while surface hidden behind nearer objects is excused. This resolves the
+    single-view ambiguities of partial segments and tolerates occlusion by other objects.
+
+    Args:
+        mesh: trimesh.Trimesh in its canonical object frame [m].
+        depth: full depth image (H, W) [m], 0 where invalid (not only the segment: other
+            objects' depth tells what may hide this one).
+        mask: (H, W) bool, the object's pixels (>= 10 with valid depth).
+        camera: the DESIGN.md camera dict.
+        init, voxel_size, max_distance, n_samples, seed: as in `register_mesh_to_points`.
+
+    Returns:
+        RegistrationResult with `transform` = T_world_object, `fitness` and `rmse` as in
+        `register_mesh_to_points`, and `consistency` in [0, 1]: the fraction of the posed
+        model's visible surface confirmed by the depth image (> 0.8 for a good fit).
+
+    Raises:
+        ToolboxError: fewer than 10 valid segment pixels, shapes not matching the camera.
+    """
+    D = check_image(depth, camera, "depth", ndim=2)
+    M = check_image(mask, camera, "mask", ndim=2).astype(bool)
+    points = depth_to_points(D, camera, M)
+    fits, model, normals, dist = _hypotheses(
+        mesh, points, init, voxel_size, max_distance, n_samples, seed, keep=6
+    )
+    spacing = float(np.sqrt(mesh.area / len(model)))
+    best: tuple[float, float, int, RegistrationResult] | None = None
+    for i, (T, fitness, rmse) in enumerate(fits):
+        c = surface_consistency(model, normals, T, D, M, camera, dist, spacing)
+        r = RegistrationResult(transform=T, fitness=fitness, rmse=rmse, consistency=c)
+        key = (fitness * c, -rmse, -i)
+        if best is None or key > best[:3]:
+            best = (*key, r)
+    assert best is not None  # there is always at least one hypothesis
+    return best[3]
+
+
+def _hypotheses(mesh, points, init, voxel_size, max_distance, n_samples, seed, *, keep):
+    """([(T_world_object, fitness, rmse)] for the `keep` best-screened starts, model samples
+    (n, 3), their normals (n, 3), inlier distance [m])."""
     P = check_points(points, "points")
     if len(P) < 10:
         raise ToolboxError(f"need at least 10 observed points, got {len(P)}")
@@ -161,14 +230,11 @@ def register_mesh_to_points(
         T, fitness, rmse = _icp.icp(coarse_obs, model, T0, 3 * dist, 20, tree=tree)
         coarse.append((-fitness, rmse, len(coarse), T))
     coarse.sort(key=lambda c: c[:3])
-    best: tuple[np.ndarray, float, float] | None = None
-    for *_, T0 in coarse[:4]:
+    fits = []
+    for *_, T0 in coarse[:keep]:
         T, fitness, rmse = _icp.icp(obs, model, T0, dist, 50, tree=tree, normals=model_normals)
-        if best is None or (fitness, -rmse) > (best[1], -best[2]):
-            best = (T, fitness, rmse)
-    assert best is not None  # coarse holds at least the global-registration hypothesis
-    T, fitness, rmse = best
-    return RegistrationResult(transform=invert_pose(T), fitness=fitness, rmse=rmse)
+        fits.append((invert_pose(T), fitness, rmse))
+    return fits, model, model_normals, dist
 
 
 def _o3d():

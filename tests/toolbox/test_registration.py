@@ -9,7 +9,12 @@ import trimesh
 from tests.toolbox.conftest import l_block, look_at_camera
 from toolbox.errors import ToolboxError
 from toolbox.geometry import make_pose, pose_distance, rotation_about_axis, transform_points
-from toolbox.registration import global_registration, icp, register_mesh_to_points
+from toolbox.registration import (
+    global_registration,
+    icp,
+    register_mesh_to_points,
+    register_mesh_to_segment,
+)
 from toolbox.render import render_scene
 from toolbox.vision import depth_to_points
 
@@ -89,3 +94,32 @@ def test_registration_rejects_too_few_points():
         register_mesh_to_points(l_block(), np.zeros((5, 3)))
     with pytest.raises(ToolboxError, match="at least 3"):
         icp(np.zeros((2, 3)), np.zeros((10, 3)))
+
+
+def test_segment_registration_resolves_a_single_view_ambiguity():
+    # Seen from this side the part's visible surface fits a flipped pose as well as the true
+    # one; only the depth image (nothing is seen where the flipped part would show) tells.
+    cam = look_at_camera((0.6, -0.6, 0.7), (0.0, 0.0, 0.0), width=640, height=360, f=450.0)
+    T = make_pose(None, (-0.2, -0.1, 0.03))
+    out = render_scene([{"id": "p", "mesh": "p", "pose": T}], {"p": l_block()}, cam)
+    r = register_mesh_to_segment(l_block(), out["depth"], out["mask"] == 0, cam)
+    d = pose_distance(r.transform, T)
+    assert d.translation < 3e-3 and d.rotation < np.deg2rad(2.0), d
+    assert r.fitness > 0.9 and r.consistency > 0.9
+
+
+def test_segment_registration_excuses_occlusion_by_other_objects():
+    mesh = l_block()
+    cam = look_at_camera((0.35, -0.35, 0.45), (0.0, 0.0, 0.03), width=320, height=240, f=350.0)
+    T = make_pose(rotation_about_axis((0, 0, 1), 0.7), (0.0, 0.0, 0.015))
+    recs = [
+        {"id": "part", "mesh": "part", "pose": T},
+        {"id": "post", "mesh": "post", "pose": make_pose(None, (0.06, -0.04, 0.06))},
+    ]
+    out = render_scene(recs, {"part": mesh, "post": trimesh.creation.box((0.04, 0.04, 0.12))}, cam)
+    r = register_mesh_to_segment(mesh, out["depth"], out["mask"] == 0, cam)
+    d = pose_distance(r.transform, T)
+    assert d.translation < 3e-3 and d.rotation < np.deg2rad(2.0), d
+    assert r.consistency > 0.9
+    with pytest.raises(ToolboxError, match="camera is 240x320"):
+        register_mesh_to_segment(mesh, out["depth"][:10], out["mask"] == 0, cam)
