@@ -68,6 +68,7 @@ class ExecutorConfig:
     release_settle: float = 0.15  # pause before and after opening [s]
     release_height: float = 0.001  # the object is let go this far above its target [m]
     in_hand_correction: bool = True
+    measure_settle: float = 0.2  # pause before reading the object's pose in the hand [s]
     park_after: bool = True
     park_time: float = 1.5  # least time of joint moves between READY and PARK [s]
     joint_speed: float = 1.2  # mean speed of the largest joint in joint moves [rad/s]
@@ -255,6 +256,8 @@ class Executor:
         self._substeps = max(1, round(self.config.control_dt / dt))
         self._tick_dt = self._substeps * dt
         self._q_cmd = data.qpos[self.index.arm_qpos].copy()
+        acts = self.index.arm_actuators
+        self._servo_lag = -model.actuator_biasprm[acts, 2] / model.actuator_gainprm[acts, 0]
         self._grip_cmd = float(data.ctrl[self.index.gripper_actuator])
         self._held: _Held | None = None
         self._step_welded = False
@@ -362,11 +365,17 @@ class Executor:
                     "lift",
                     f"the object rose {rise * 1000:.0f} mm of {expected * 1000:.0f} mm",
                 )
+            self._settle(self.config.measure_settle)
             place = self._place_segments(oid, grasp, target, transfer_z)
             self._run_phase("transfer", place[:1])
-            in_hand = se3.inverse(self.ik.fk(self._q_cmd)) @ self.object_pose(oid)
+            self._settle(self.config.measure_settle)
+            in_hand = se3.inverse(robot.tcp_pose(self.data, self.index)) @ self.object_pose(oid)
             if np.linalg.norm(in_hand[:3, 3] - se3.inverse(grasp.T_object_tcp)[:3, 3]) > 0.03:
                 raise _StepAbort("dropped", "transfer", "the object left the hand")
+            if self.config.in_hand_correction:  # again, for any slip during the transfer
+                place = place[:1] + self._place_segments(
+                    oid, grasp, target, transfer_z, skip_transfer=True
+                )
             self._run_phase("place", place[1:3])
             self._mark("release")
             self._run(place[3:6])
@@ -593,13 +602,15 @@ class Executor:
         ]
 
     def _place_segments(
-        self, oid: str, grasp: Grasp, target: np.ndarray, z: float
+        self, oid: str, grasp: Grasp, target: np.ndarray, z: float, *, skip_transfer: bool = False
     ) -> list[PlannedSegment]:
-        """Plan the place from the lifted pose, corrected for the object's pose in the hand."""
+        """Plan the place from the current pose (after the lift, or above the target with
+        `skip_transfer`), corrected for the object's pose in the hand."""
         nominal = grasp.place_tcp
         candidates = []
         if self.config.in_hand_correction:
-            T_tcp = self.ik.fk(self._q_cmd)
+            # Against the measured TCP: the arm may still lag its command after a move.
+            T_tcp = robot.tcp_pose(self.data, self.index)
             in_hand = se3.inverse(T_tcp) @ self.object_pose(oid)  # object in the TCP frame
             T_place = target @ self.symmetries[oid][grasp.symmetry]
             corrected = T_place @ se3.inverse(in_hand)
@@ -609,8 +620,9 @@ class Executor:
         candidates.append(nominal)
         failure: PlanFailure | None = None
         for place_tcp in candidates:
+            motion = self._place_motion(grasp, place_tcp, z)
             planned = plan_segments(
-                self.ik, self._q_cmd, self._place_motion(grasp, place_tcp, z), self._tick_dt
+                self.ik, self._q_cmd, motion[1:] if skip_transfer else motion, self._tick_dt
             )
             if not isinstance(planned, PlanFailure):
                 return planned
@@ -636,17 +648,24 @@ class Executor:
     def _run(self, planned: Sequence[PlannedSegment]) -> None:
         m, d = self.model, self.data
         arm_act, grip_act = self.index.arm_actuators, self.index.gripper_actuator
+        n = self._substeps
+        fractions = np.arange(1, n + 1) / n
         for seg in planned:
             for k in range(len(seg.q)):
-                self._q_cmd = seg.q[k]
-                d.ctrl[arm_act] = self._q_cmd
+                q_prev, q_next = self._q_cmd, seg.q[k]
+                # The position servos damp the joint velocity itself (-kv q̇): feeding the
+                # planned velocity forward (kv/kp · q̇_d) removes the lag that would leave.
+                lead = self._servo_lag * (q_next - q_prev) / self._tick_dt
+                self._q_cmd = q_next
                 if seg.grip is not None:
                     self._grip_cmd = float(seg.grip[k])
                 d.ctrl[grip_act] = self._grip_cmd
                 self._update_weld()
-                for _ in range(self._substeps):
+                for f in fractions:
+                    d.ctrl[arm_act] = q_prev + f * (q_next - q_prev) + lead
                     mujoco.mj_step(m, d)
                 self._maybe_record()
+        d.ctrl[arm_act] = self._q_cmd
 
     def _settle(self, duration: float) -> None:
         n = max(1, round(duration / self._tick_dt))
