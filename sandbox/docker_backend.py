@@ -38,6 +38,7 @@ class _AttachChannel(Channel):
     """The container's stdin/stdout over Docker's attach socket (stdout/stderr multiplexed)."""
 
     def __init__(self, sock: Any) -> None:
+        self.wrapper = sock  # a SocketIO over the raw socket: the fd closes once both are closed
         self.sock = getattr(sock, "_sock", sock)
         self.sock.setblocking(True)
         self.buf = bytearray()
@@ -76,6 +77,7 @@ class _AttachChannel(Channel):
     def close(self) -> None:
         with contextlib.suppress(OSError):
             self.sock.shutdown(socket.SHUT_RDWR)
+        self.wrapper.close()
         self.sock.close()
 
 
@@ -108,9 +110,12 @@ class DockerExecutor(HarnessExecutor):
         output_limit_mb: float = 64,
         tail_bytes: int = 8192,
     ) -> None:
+        self._own_client = client is None
         self.client = client or docker_client()
         self.image = image or image_tag()
         if not has_image(self.client, self.image):
+            if self._own_client:
+                self.client.close()
             raise SandboxUnavailable(
                 f"the sandbox image {self.image} is missing (the image tag follows its inputs): "
                 "build it with `make sandbox-image` (works offline)"
@@ -177,6 +182,11 @@ class DockerExecutor(HarnessExecutor):
 
     def _harness_path(self, staged: Path) -> str:
         return f"/in/{staged.name}"
+
+    def close(self) -> None:
+        super().close()
+        if self._own_client:
+            self.client.close()
 
     def _kill(self) -> None:
         import docker

@@ -456,9 +456,11 @@ def _children(ppid: int) -> list[int]:
 
 
 def _remove(path: str) -> None:
+    """Remove a file or a tree without following links, even dirs a job chmod-ed to 000."""
     try:
         if os.path.isdir(path) and not os.path.islink(path):
-            for dirpath, dirnames, _ in os.walk(path):  # a job may have chmod-ed dirs to 000
+            os.chmod(path, 0o700)
+            for dirpath, dirnames, _ in os.walk(path):  # top-down: fix modes before descending
                 for d in dirnames:
                     full = os.path.join(dirpath, d)
                     if not os.path.islink(full):
