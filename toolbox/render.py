@@ -239,7 +239,26 @@ class _Context:
         return pm
 
     def delete(self) -> None:
-        self.renderer.delete()
+        """Free this context's GL objects and the context itself.
+
+        Not `OffscreenRenderer.delete()`: its `eglTerminate` would end the display shared by
+        every EGL context of the process (the other sizes', MuJoCo's).
+        """
+        renderer, platform = self.renderer, self.renderer._platform
+        platform.make_current()
+        renderer._renderer.delete()
+        if hasattr(platform, "_egl_context"):
+            from OpenGL import EGL
+
+            display = platform._egl_display
+            EGL.eglMakeCurrent(display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+            EGL.eglDestroyContext(display, platform._egl_context)
+        else:
+            platform.delete_context()
+        # Leave nothing for OffscreenRenderer.__del__ to tear down a second time.
+        renderer._renderer = None
+        renderer._platform = None
+        self._meshes.clear()
 
 
 @contextlib.contextmanager

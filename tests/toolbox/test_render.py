@@ -156,3 +156,18 @@ def test_rendering_1280x720_is_fast(cube):
     per_call = (time.perf_counter() - t0) / 3
     assert set(np.unique(out["mask"])) == {-1, *range(10)}
     assert per_call < 0.5, f"{per_call:.3f} s per 1280x720 render"
+
+
+def test_evicting_a_context_keeps_the_others_working(cube):
+    from toolbox import render
+
+    recs = [cube_record(pose_from_xyz_yaw(0, 0, HALF, 0))]
+    keep = top_down_camera(1.0, width=200, height=100, f=150.0)
+    ref = render_scene(recs, {"cube": cube}, keep)
+    for i in range(render._MAX_CONTEXTS + 1):  # more sizes than are cached
+        render_scene(
+            recs, {"cube": cube}, top_down_camera(1.0, width=64 + 8 * i, height=48, f=60.0)
+        )
+        render_scene(recs, {"cube": cube}, keep)  # stays most recently used
+    np.testing.assert_array_equal(render_scene(recs, {"cube": cube}, keep)["mask"], ref["mask"])
+    assert len(render._CONTEXTS) == render._MAX_CONTEXTS
