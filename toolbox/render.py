@@ -9,6 +9,7 @@ pixel for pixel. The first call for an image size takes ~1 s (OpenGL context); l
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import ctypes
 import os
@@ -293,6 +294,17 @@ def _current_context_restored():
 def _address(handle) -> int:
     """The address of an EGL handle (0 for EGL_NO_*), whatever ctypes wrapper it comes in."""
     return ctypes.cast(handle, ctypes.c_void_p).value or 0
+
+
+@atexit.register
+def _delete_contexts() -> None:
+    """Free the cached contexts at exit, before pyrender's own finaliser would eglTerminate
+    a display that other libraries (MuJoCo) may still be tearing down."""
+    with _LOCK:
+        while _CONTEXTS:
+            _, ctx = _CONTEXTS.popitem()
+            with contextlib.suppress(Exception):  # interpreter teardown: nothing left to tell
+                ctx.delete()
 
 
 def _context(width: int, height: int) -> _Context:
