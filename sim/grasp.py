@@ -221,8 +221,23 @@ def boxes_hit_triangles(
 
 
 def _world_triangles(mesh: trimesh.Trimesh, pose: np.ndarray) -> np.ndarray:
-    tris = mesh.vertices[mesh.faces]  # (n, 3, 3)
+    tris = np.asarray(mesh.vertices)[np.asarray(mesh.faces)]  # (n, 3, 3), plain arrays
     return tris @ pose[:3, :3].T + pose[:3, 3]
+
+
+@dataclass(frozen=True)
+class _Triangles:
+    """A mesh's triangles in the world, with their bounding box for a quick rejection."""
+
+    tris: np.ndarray  # (n, 3, 3)
+    lo: np.ndarray  # (3,)
+    hi: np.ndarray  # (3,)
+
+    @classmethod
+    def of(cls, mesh: trimesh.Trimesh, pose: np.ndarray) -> _Triangles:
+        tris = _world_triangles(mesh, pose)
+        flat = tris.reshape(-1, 3)
+        return cls(tris, flat.min(axis=0), flat.max(axis=0))
 
 
 def _gripper_hits(
@@ -230,14 +245,17 @@ def _gripper_hits(
     gap: float,
     tip: float,
     margin: float,
-    triangle_sets: Sequence[np.ndarray],
+    triangle_sets: Sequence[_Triangles],
     fingers: FingerModel,
 ) -> bool:
     R = T_world_tcp[:3, :3]
     for centre, half in fingers.boxes(gap, tip, margin):
-        c = T_world_tcp[:3, :3] @ centre + T_world_tcp[:3, 3]
-        for tris in triangle_sets:
-            if boxes_hit_triangles(c, half, R, tris):
+        c = R @ centre + T_world_tcp[:3, 3]
+        extent = np.abs(R) @ half  # the box's world AABB half sizes
+        for t in triangle_sets:
+            if np.any(c + extent < t.lo) or np.any(c - extent > t.hi):
+                continue
+            if boxes_hit_triangles(c, half, R, t.tris):
                 return True
     return False
 
@@ -437,9 +455,9 @@ def plan_grasps(
         )
 
     pairs = _face_pairs(mesh, T_pick, max_width, fingers, table, rejected)
-    own_pick = _world_triangles(mesh, T_pick)
-    pick_sets = [_world_triangles(o.mesh, o.pose) for o in pick_obstacles]
-    place_sets = [_world_triangles(o.mesh, o.pose) for o in place_obstacles]
+    own_pick = _Triangles.of(mesh, T_pick)
+    pick_sets = [_Triangles.of(o.mesh, o.pose) for o in pick_obstacles]
+    place_sets = [_Triangles.of(o.mesh, o.pose) for o in place_obstacles]
     T_pick_inv = se3.inverse(T_pick)
     pick_ids = [o.id for o in pick_obstacles]
     place_ids = [o.id for o in place_obstacles]
@@ -455,6 +473,7 @@ def plan_grasps(
         side = (max_width + 0.005 - pair.width) / 2
         tip_contact = table.tip_at_gap(pair.width)
         tcp_z = pair.tip_z + tip_contact  # the TCP sits above the fingertips
+        own_hit: dict[tuple[float, float], bool] = {}
         for flip in (1.0, -1.0):
             tcp_pick = _tcp_pose(flip * pair.closing, pair.centre[:2], tcp_z)
             T_obj_tcp = T_pick_inv @ tcp_pick
@@ -470,9 +489,12 @@ def plan_grasps(
                     open_gap = pair.width + 2 * clearance
                     reach = max(tip_contact, table.tip_at_gap(open_gap))  # deepest fingertip
                     # The object itself: nothing may stick out into the jaws' path.
-                    if _gripper_hits(
-                        tcp_pick, pair.width + 0.002, reach, 0.0, [own_pick], fingers
-                    ) or _gripper_hits(tcp_pick, open_gap, reach, 0.0, [own_pick], fingers):
+                    key = (flip, open_gap)
+                    if key not in own_hit:
+                        own_hit[key] = _gripper_hits(
+                            tcp_pick, pair.width + 0.002, reach, 0.0, [own_pick], fingers
+                        ) or _gripper_hits(tcp_pick, open_gap, reach, 0.0, [own_pick], fingers)
+                    if own_hit[key]:
                         reject("fingers hit the object itself")
                         continue
                     if tcp_place[2, 3] - reach < table_z + fingers.tip_margin - 0.001:
@@ -521,8 +543,8 @@ def _clear_margin(
     tcp_place: np.ndarray,
     gap: float,
     reach: float,
-    pick_sets: Sequence[np.ndarray],
-    place_sets: Sequence[np.ndarray],
+    pick_sets: Sequence[_Triangles],
+    place_sets: Sequence[_Triangles],
     margins: Sequence[float],
     fingers: FingerModel,
 ) -> tuple[float | None, tuple[str, int]]:
@@ -547,7 +569,7 @@ def _first_hit(
     gap: float,
     tip: float,
     margin: float,
-    triangle_sets: Sequence[np.ndarray],
+    triangle_sets: Sequence[_Triangles],
     fingers: FingerModel,
 ) -> int:
     for i, tris in enumerate(triangle_sets):
