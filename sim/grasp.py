@@ -56,6 +56,21 @@ class FingerModel:
     tip_margin: float = 0.003  # fingertips stay this far above whatever is below them
     min_contact: float = 0.008  # the least pad contact height accepted [m]
     high_contact: float = 0.015  # contact height of the alternative grasp high on a face [m]
+    ceiling: tuple[tuple[float, float], ...] = (
+        (0.006, 0.0748),
+        (0.025, 0.0655),
+        (0.046, 0.0571),
+        (0.067, 0.0549),
+        (0.085, 0.0375),
+    )
+    """(jaw gap, free height above the fingertips between the fingers) [m]: above it the spring
+    links and the base close the space between the jaws; the wider open, the lower."""
+    inner_half_width: float = 0.025
+
+    def ceiling_at(self, gap: float) -> float:
+        """Free height between the fingers above their tips at jaw opening `gap` [m]."""
+        gaps, heights = zip(*self.ceiling, strict=True)
+        return float(np.interp(gap, gaps, heights))
 
     def boxes(self, gap: float, tip: float, margin: float) -> list[tuple[np.ndarray, np.ndarray]]:
         """Boxes (centre (3,), half extents (3,)) in the TCP frame (z towards the fingertips)
@@ -71,6 +86,10 @@ class FingerModel:
                 centre = np.array([0.0, side * (y_in + y_out) / 2, tip - (lo + hi) / 2])
                 half = np.array([hw, (y_out - y_in) / 2, (hi - lo) / 2]) + margin
                 out.append((centre, half))
+        ceiling = self.ceiling_at(gap)
+        centre = np.array([0.0, 0.0, tip - ceiling - 0.5])
+        half = np.array([self.inner_half_width, y0, 0.5]) + np.array([margin, 0.0, margin])
+        out.append((centre, half))
         centre = np.array([0.0, 0.0, tip - self.palm_from - 0.5])
         half = np.array([self.palm_half[0], self.palm_half[1], 0.5]) + margin
         out.append((centre, half))
@@ -346,10 +365,12 @@ def _contact_patch(
     a2, b2 = to2d(tri_a), to2d(tri_b)
     lo = np.maximum(a2.reshape(-1, 2).min(0), b2.reshape(-1, 2).min(0))
     hi = np.minimum(a2.reshape(-1, 2).max(0), b2.reshape(-1, 2).max(0))
-    if np.any(hi - lo < fingers.min_contact * 0.5):
+    # A facet of a curved side may be a narrow strip: the pads then touch along a line.
+    if hi[0] - lo[0] < 0.002 or hi[1] - lo[1] < fingers.min_contact:
         return []
     step = 0.001
-    us = np.arange(lo[0] + step / 2, hi[0], step)
+    step_u = min(step, (hi[0] - lo[0]) / 4)
+    us = np.arange(lo[0] + step_u / 2, hi[0], step_u)
     zs = np.arange(lo[1] + step / 2, hi[1], step)
     if len(us) == 0 or len(zs) == 0:
         return []
@@ -365,7 +386,13 @@ def _contact_patch(
     # The lowest grip covers most of the face; a grip high on the face keeps the fingers'
     # linkage above a tall neighbour.
     heights = [z_lo]
-    if z_hi - fingers.high_contact > z_lo + 0.005:
+    # Low enough, but with the object's top below the linkage between the fingers.
+    top = float(obj_tris[..., 2].max())
+    gap = width + 2 * max(fingers.clearances)
+    z_ceiling = top - fingers.ceiling_at(gap) + fingers.tip_margin
+    if z_lo + 0.002 < z_ceiling <= z_hi - fingers.min_contact:
+        heights.append(z_ceiling)
+    if z_hi - fingers.high_contact > max(heights) + 0.005:
         heights.append(z_hi - fingers.high_contact)
     mid_plane = 0.5 * (np.mean(tri_a.reshape(-1, 3) @ n) + np.mean(tri_b.reshape(-1, 3) @ n))
     u_com = float(com @ u_axis)
@@ -383,7 +410,7 @@ def _contact_patch(
             if c and start is None:
                 start = i
             elif not c and start is not None:
-                runs.append((float(us[start]) - step / 2, float(us[i - 1]) + step / 2))
+                runs.append((float(us[start]) - step_u / 2, float(us[i - 1]) + step_u / 2))
                 start = None
         u0, u1 = min(runs, key=lambda r: max(r[0] - u_com, u_com - r[1], 0.0))
         u_c = (
