@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import gc
 import hashlib
 import os
 import re
@@ -26,6 +27,7 @@ import time
 import tomllib
 import urllib.parse
 import urllib.request
+import warnings
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -299,18 +301,27 @@ def _download(dest: Path, req: tuple[str, str, str, str]) -> None:
 
 def docker_client(timeout: int = 600) -> Any:
     """A client for the local Docker engine; raises `SandboxUnavailable` with the fix."""
-    try:
-        import docker
+    import docker
 
+    try:
         client = docker.from_env(timeout=timeout)
-        client.ping()
+        try:
+            client.ping()
+        except Exception:
+            client.close()
+            raise
+        return client
     except Exception as e:
-        raise SandboxUnavailable(
-            f"the Docker engine is not reachable ({type(e).__name__}: {str(e)[:200]}). Start it "
-            "with `make system` (or `sudo dockerd &`), then `make sandbox-image`. The local "
-            "backend (--sandbox local) runs without any isolation and is never chosen for you."
-        ) from None
-    return client
+        problem = f"{type(e).__name__}: {str(e)[:200]}"
+    # The SDK leaks the socket of a failed connect; finalize it here, quietly, not at random.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ResourceWarning)
+        gc.collect()
+    raise SandboxUnavailable(
+        f"the Docker engine is not reachable ({problem}). Start it with `make system` (or "
+        "`sudo dockerd &`), then `make sandbox-image`. The local backend (--sandbox local) "
+        "runs without any isolation and is never chosen for you."
+    )
 
 
 def has_image(client: Any, ref: str) -> bool:

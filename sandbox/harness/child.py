@@ -10,6 +10,7 @@ like any other, and the exit status and timing are observed by the parent, not r
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import importlib
 import importlib.abc
 import importlib.util
@@ -29,6 +30,7 @@ from . import wire
 from .context import EntryContext
 
 RESULT_FD = 3
+_PR_SET_DUMPABLE = 4
 MAX_MESSAGE = 4000  # [chars]
 MAX_TRACEBACK = 8000  # [chars]
 MAX_JOB_FILE = 1 << 20  # [bytes] job.json
@@ -67,6 +69,9 @@ def run(
 
 def _isolate(result_fd: int, out_fd: int, err_fd: int, memory_mb: int) -> None:
     """Own session, only the four descriptors it needs, default signals, a memory limit."""
+    # The harness is non-dumpable (so jobs cannot reach into it) and a fork inherits that;
+    # the job itself may be dumpable, which gives it back its own /proc/self files.
+    ctypes.CDLL(None).prctl(_PR_SET_DUMPABLE, 1, 0, 0, 0)
     os.setsid()
     null = os.open(os.devnull, os.O_RDONLY)
     os.dup2(null, 0)

@@ -188,7 +188,10 @@ def encode_value(value: Any, *, max_bytes: int) -> tuple[bytes, bytes]:
         raise BadValue(path, f"{kind.__module__}.{kind.__qualname__} is not JSON or a numpy array")
 
     tree = walk(value, "$", 0, set())
-    text = json.dumps(tree, separators=(",", ":")).encode()
+    try:
+        text = json.dumps(tree, separators=(",", ":")).encode()
+    except ValueError as e:  # e.g. an int too long to print
+        raise BadValue("$", f"not JSON: {e}") from None
     if len(text) > max_bytes:
         raise BadValue("$", f"value is over the {max_bytes}-byte output cap")
     blob = b""

@@ -1,0 +1,145 @@
+"""The Docker backend against the real engine: results, entry points, hardening, recovery."""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from sandbox import Job, SandboxUnavailable
+from sandbox.docker_backend import DockerExecutor, reap_leftovers
+from sandbox.harness.server import DEFAULT_PRELOAD
+from sandbox.image import LABEL
+from tests.sandbox.conftest import assert_clean_next_job
+
+pytestmark = pytest.mark.docker
+
+
+def test_ok_with_arrays_and_extra_modules(docker_executor):
+    source = (
+        "import helper\ndef f(pose, n):\n    return {'pose': helper.shift(pose, n), 'n': n + 1}\n"
+    )
+    helper = (
+        "import numpy as np\ndef shift(T, n):\n    T = T.copy()\n    T[:3, 3] += n\n    return T\n"
+    )
+    report = docker_executor.run(
+        Job(
+            source=source,
+            function="f",
+            inputs={"pose": np.eye(4), "n": 2},
+            modules={"helper": helper},
+        )
+    )
+    assert report.verdict == "ok", report
+    assert report.output["pose"][0, 3] == 2.0 and report.output["n"] == 3
+    assert report.backend == "docker" and report.peak_memory_mb is not None
+
+
+def test_entry_point_in_the_image(docker_executor):
+    report = docker_executor.run(
+        Job(
+            source="def f(x):\n    return 1 / x\n",
+            function="f",
+            entry="sandbox.harness.entries:call_many",
+            inputs={"calls": [{"x": 2}, {"x": 0}]},
+        )
+    )
+    assert report.verdict == "ok", report
+    assert (
+        report.output[0]["ok"] == 0.5 and report.output[1]["error"]["type"] == "ZeroDivisionError"
+    )
+
+
+def test_missing_entry_point_is_an_exception(docker_executor):
+    report = docker_executor.run(Job(source="", function="f", entry="contracts.nothing_here:run"))
+    assert report.verdict == "exception" and report.exception.type == "ModuleNotFoundError"
+
+
+def test_heavy_modules_are_preloaded_and_rendering_works(docker_executor):
+    status = docker_executor.status()
+    assert status["errors"] == {}, status["errors"]
+    assert set(DEFAULT_PRELOAD) <= set(status["preloaded"])
+    source = """
+import numpy as np, pyrender, trimesh
+def f():
+    scene = pyrender.Scene()
+    scene.add(pyrender.Mesh.from_trimesh(trimesh.creation.box()))
+    pose = np.eye(4); pose[2, 3] = 3.0
+    scene.add(pyrender.PerspectiveCamera(yfov=1.0), pose=pose)
+    color, depth = pyrender.OffscreenRenderer(64, 48).render(scene)
+    return {"depth_min": float(depth[depth > 0].min()), "shape": list(color.shape)}
+"""
+    report = docker_executor.run(Job(source=source, function="f", timeout_s=60))
+    assert report.verdict == "ok", report
+    assert report.output["shape"] == [48, 64, 3] and abs(report.output["depth_min"] - 2.5) < 1e-3
+
+
+def test_container_is_hardened_as_configured(docker_executor):
+    docker_executor.run(Job(source="def f():\n    return 1\n", function="f"))
+    docker_executor.container.reload()
+    attrs = docker_executor.container.attrs
+    host = attrs["HostConfig"]
+    assert host["NetworkMode"] == "none" and host["ReadonlyRootfs"] is True
+    assert host["CapDrop"] == ["ALL"] and "no-new-privileges:true" in host["SecurityOpt"]
+    assert (
+        host["Memory"] == host["MemorySwap"] > 0 and host["NanoCpus"] > 0 and host["PidsLimit"] > 0
+    )
+    assert host["Privileged"] is False and host["IpcMode"] == "private"
+    assert attrs["Config"]["User"] == "10001:10001"
+    assert all(m["RW"] is False for m in attrs["Mounts"])
+    assert attrs["Config"]["Labels"][LABEL] == "1"
+
+
+def test_container_killed_from_the_host_gives_crashed_then_recovers(docker_executor):
+    before = docker_executor.restarts
+    container = docker_executor.container
+    killer = threading.Timer(1.0, container.kill)
+    killer.start()
+    try:
+        report = docker_executor.run(
+            Job(source="import time\ndef f():\n    time.sleep(30)\n", function="f")
+        )
+    finally:
+        killer.cancel()
+    assert report.verdict == "crashed" and "container died" in report.detail, report
+    assert docker_executor.run(Job(source="def f():\n    return 5\n", function="f")).output == 5
+    assert docker_executor.restarts == before + 1
+    docker_executor.warm()
+    assert_clean_next_job(docker_executor)
+
+
+def test_leftover_containers_are_reaped(sandbox_image, docker_executor):
+    client = docker_executor.client
+    dead_owner = {LABEL: "1", f"{LABEL}.owner": f"{__import__('socket').gethostname()}:999999999:0"}
+    leftover = client.containers.run(
+        sandbox_image, ["sleep", "600"], detach=True, labels=dead_owner, network_mode="none"
+    )
+    try:
+        assert reap_leftovers(client) >= 1
+        ids = {c.id for c in client.containers.list(all=True, filters={"label": f"{LABEL}=1"})}
+        assert leftover.id not in ids
+    finally:
+        with contextlib.suppress(Exception):
+            leftover.remove(force=True)
+
+
+def test_missing_image_says_how_to_build_it():
+    with pytest.raises(SandboxUnavailable, match="make sandbox-image"):
+        DockerExecutor(image="rivet-sandbox:000000000000")
+
+
+def test_cold_start_and_warm_jobs_are_quick(sandbox_image):
+    with DockerExecutor(image=sandbox_image) as ex:
+        t0 = time.perf_counter()
+        assert ex.run(Job(source="def f():\n    return 1\n", function="f")).ok
+        cold = time.perf_counter() - t0
+        ex.warm()
+        t0 = time.perf_counter()
+        for _ in range(10):
+            ex.run(Job(source="def f():\n    return 1\n", function="f"))
+        warm = (time.perf_counter() - t0) / 10
+    # Generous bounds for a loaded 2-core CI machine; `make bench` reports the real figures.
+    assert cold < 10 and warm < 0.25, (cold, warm)

@@ -1,0 +1,125 @@
+"""The local backend: the same verdicts as Docker, without isolation, and it says so."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from sandbox import BadJob, Job
+from sandbox.local_backend import WARNING, LocalExecutor
+
+HELPER = "def double(x):\n    return 2 * x\n"
+
+
+def run(executor, source: str, **kw):
+    return executor.run(Job(source=source, function=kw.pop("function", "f"), **kw))
+
+
+def test_it_warns_that_it_isolates_nothing(capsys):
+    with LocalExecutor(preload="none") as ex:
+        assert run(ex, "def f():\n    return 1\n").ok
+    assert WARNING in capsys.readouterr().err
+    assert "isolates NOTHING" in WARNING
+
+
+def test_ok_with_arrays_modules_and_stdout(local_executor):
+    source = "import helper\ndef f(a, k):\n    print('hello')\n    return {'b': helper.double(a), 'k': k}\n"
+    report = run(
+        local_executor,
+        source,
+        inputs={"a": np.arange(3.0), "k": [1, "x"]},
+        modules={"helper": HELPER},
+    )
+    assert report.verdict == "ok", report
+    assert np.array_equal(report.output["b"], [0.0, 2.0, 4.0]) and report.output["k"] == [1, "x"]
+    assert report.stdout_tail == "hello\n" and report.stdout_bytes == 6
+    assert report.wall_time_s > 0 and report.backend == "local"
+
+
+def test_exception_traceback_shows_only_the_draft(local_executor):
+    source = "import helper\ndef f():\n    return helper.boom()\n"
+    helper = "def boom():\n    raise KeyError('missing')\n"
+    report = run(local_executor, source, modules={"helper": helper})
+    assert report.verdict == "exception"
+    assert report.exception.type == "KeyError" and report.exception.message == "'missing'"
+    tb = report.exception.traceback
+    assert 'File "draft.py", line 3, in f' in tb and 'File "helper.py", line 2, in boom' in tb
+    assert "child.py" not in tb and "server.py" not in tb
+
+
+def test_syntax_errors_point_at_the_draft_line(local_executor):
+    report = run(local_executor, "def f():\n    return (\n")
+    assert report.verdict == "exception" and report.exception.type == "SyntaxError"
+    assert "draft.py" in report.exception.traceback
+
+
+def test_missing_function_is_an_exception(local_executor):
+    report = run(local_executor, "x = 1\n", function="render")
+    assert report.verdict == "exception" and "no function 'render'" in report.exception.message
+
+
+@pytest.mark.parametrize(
+    ("source", "verdict", "detail"),
+    [
+        ("import time\ndef f():\n    time.sleep(60)\n", "timeout", "time budget"),
+        ("def f():\n    return bytearray(1 << 34)\n", "oom", "memory limit"),
+        ("import os\ndef f():\n    os.abort()\n", "crashed", "SIGABRT"),
+        ("import os\ndef f():\n    os._exit(3)\n", "crashed", "code 3"),
+        ("def f():\n    return {'m': lambda: 1}\n", "bad_output", "output.m: builtins.function"),
+    ],
+)
+def test_each_verdict(local_executor, source, verdict, detail):
+    report = run(local_executor, source, timeout_s=1, memory_mb=128)
+    assert report.verdict == verdict, report
+    assert detail in report.detail
+
+
+def test_output_schema_is_checked_on_the_host(local_executor):
+    schema = {"type": "object", "properties": {"n": {"type": "integer"}}, "required": ["n"]}
+    bad = run(local_executor, "def f():\n    return {'n': 'three'}\n", output_schema=schema)
+    assert bad.verdict == "bad_output" and "output.n" in bad.detail
+    assert run(local_executor, "def f():\n    return {'n': 3}\n", output_schema=schema).ok
+
+
+def test_entry_point_receives_the_loaded_modules(local_executor):
+    source = "def f(x):\n    if x < 0:\n        raise ValueError('negative')\n    return x * x\n"
+    report = local_executor.run(
+        Job(
+            source=source,
+            function="f",
+            entry="sandbox.harness.entries:call_many",
+            inputs={"calls": [{"x": 2}, {"x": -1}, {"x": 3}]},
+        )
+    )
+    assert report.verdict == "ok", report
+    assert [r.get("ok") for r in report.output] == [4, None, 9]
+    assert report.output[1]["error"] == {"type": "ValueError", "message": "negative"}
+
+
+def test_unsendable_inputs_are_the_callers_mistake(local_executor):
+    with pytest.raises(BadJob, match=r"inputs\.x"):
+        run(local_executor, "def f(x):\n    return x\n", inputs={"x": object()})
+
+
+def test_escaped_children_are_killed_after_the_job(local_executor):
+    source = (
+        "import os, subprocess\n"
+        "def f():\n"
+        "    p = subprocess.Popen(['sleep', '1000'], start_new_session=True)\n"
+        "    return p.pid\n"
+    )
+    report = run(local_executor, source)
+    assert report.ok
+    with pytest.raises(ProcessLookupError):
+        os.kill(report.output, 0)
+
+
+def test_a_killed_harness_gives_crashed_and_a_fresh_one(local_executor):
+    source = "import os, signal\ndef f():\n    os.kill(os.getppid(), signal.SIGKILL)\n    import time; time.sleep(5)\n"
+    before = local_executor.restarts
+    report = run(local_executor, source)
+    assert report.verdict == "crashed" and "harness died" in report.detail
+    assert run(local_executor, "def f():\n    return 7\n").output == 7
+    assert local_executor.restarts == before + 1
