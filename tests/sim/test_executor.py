@@ -204,3 +204,70 @@ def test_records_frames_at_the_configured_rate():
     assert result.ok, result.failure
     assert result.frames == len(frames)
     assert len(frames) == pytest.approx(result.sim_time * 10.0, abs=2)
+
+
+def _mesh_scene(objects: dict[str, tuple[list[trimesh.Trimesh], np.ndarray, float]]):
+    """Table plus one free body per entry: (convex parts, pose, mass); the robot parked."""
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.65, 0.75, 0.025], pos=[0.35, 0.0, -0.025]
+    )
+    for name, (parts, pose, mass) in objects.items():
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, pose[:3, :3].ravel())
+        body = spec.worldbody.add_body(name=name, pos=pose[:3, 3], quat=quat)
+        body.add_freejoint()
+        volume = sum(p.volume for p in parts)
+        for i, part in enumerate(parts):
+            spec.add_mesh(
+                name=f"{name}/{i}",
+                uservert=part.vertices.ravel().tolist(),
+                userface=part.faces.ravel().tolist(),
+            )
+            body.add_geom(
+                type=mujoco.mjtGeom.mjGEOM_MESH,
+                meshname=f"{name}/{i}",
+                mass=mass * part.volume / volume,
+                friction=[0.8, 0.005, 0.0001],
+            )
+    robot.attach_robot(spec)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, model.key(robot.PARK_KEY).id)
+    mujoco.mj_forward(model, data)
+    return model, data
+
+
+@pytest.mark.slow
+def test_a_knob_plate_and_a_tall_pillar_are_placed_precisely():
+    plate = trimesh.creation.box((0.09, 0.09, 0.015))  # too wide for the jaws: the knob it is
+    plate.apply_translation((0, 0, 0.0075))
+    knob = trimesh.creation.box((0.015, 0.015, 0.015))
+    knob.apply_translation((0, 0, 0.0225))
+    pillar = trimesh.creation.box((0.03, 0.03, 0.08))
+    pillar.apply_translation((0, 0, 0.04))
+    model, data = _mesh_scene(
+        {
+            "plate": ([plate, knob], _at(0.4, 0.17, 0.0, 0.3), 0.08),
+            "pillar": ([pillar], _at(0.6, -0.15, 0.0, -0.4), 0.06),
+        }
+    )
+    quarter_turns = [se3.rot_z(a) for a in (0.0, np.pi / 2, np.pi, 3 * np.pi / 2)]
+    ex = Executor(
+        model,
+        data,
+        {
+            "plate": (trimesh.util.concatenate([plate, knob]), quarter_turns),
+            "pillar": (pillar, quarter_turns),
+        },
+    )
+    # The plate goes beside the pillar's target, 2 mm apart.
+    plan = [
+        {"object": "pillar", "target_pose": _at(0.5, 0.0, 0.0, 0.2)},
+        {"object": "plate", "target_pose": _at(0.5, 0.0, 0.0, 0.2) @ se3.make(t=[0.0, 0.062, 0.0])},
+    ]
+    result = ex.execute(plan)
+    assert result.ok, result.failure
+    for step in result.steps:
+        assert step.position_error < 0.003 and step.yaw_error < np.radians(2.0), step
+    assert result.steps[1].grasp.width == pytest.approx(0.015, abs=1e-6)

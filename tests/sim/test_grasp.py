@@ -14,7 +14,7 @@ if _SHARED.is_dir():
     os.environ.setdefault("MENAGERIE_ROOT", str(_SHARED))
 
 from contracts import se3  # noqa: E402
-from sim.grasp import Obstacle, boxes_hit_triangles, plan_grasps  # noqa: E402
+from sim.grasp import FingerModel, Obstacle, boxes_hit_triangles, plan_grasps  # noqa: E402
 from sim.robot import gripper_table  # noqa: E402
 
 CUBE = trimesh.creation.box((0.04, 0.04, 0.04))  # origin at the centre
@@ -131,3 +131,26 @@ def test_box_triangle_overlap():
     assert not boxes_hit_triangles(np.array([0.2, 0.2, 0.2]), np.array([0.05, 0.05, 0.05]), R, tri)
     # A box straddling the plane inside the triangle without containing a vertex.
     assert boxes_hit_triangles(np.array([0.3, 0.3, 0.0]), np.array([0.01, 0.01, 1.0]), R, tri)
+
+
+def test_a_tall_pillar_is_gripped_high_enough_to_clear_the_linkage():
+    pillar = trimesh.creation.box((0.03, 0.03, 0.08))
+    pillar.apply_translation((0, 0, 0.04))
+    report = plan_grasps(pillar, _at(0.5, 0.0, 0.0), _at(0.45, 0.1, 0.0))
+    assert report.grasps
+    fingers = FingerModel()
+    for g in report.grasps:
+        tip = g.pick_tcp[2, 3] - gripper_table().tip_at_gap(g.width)
+        assert tip + fingers.ceiling_at(g.open_gap) >= 0.08  # the top stays below the linkage
+
+
+def test_a_cylinder_is_gripped_across_its_side():
+    cylinder = trimesh.creation.cylinder(radius=0.02, height=0.05, sections=32)
+    report = plan_grasps(cylinder, _at(0.5, 0.0, 0.025), _at(0.45, 0.1, 0.025))
+    assert report.grasps  # across the round side (its flat ends are horizontal)
+    assert all(g.width == pytest.approx(0.04, abs=0.0005) for g in report.grasps)
+    closing = {
+        round(float(np.arctan2(g.pick_tcp[1, 1], g.pick_tcp[0, 1])) % np.pi, 3)
+        for g in report.grasps
+    }
+    assert len(closing) >= 8  # many directions around the side
