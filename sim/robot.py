@@ -85,8 +85,10 @@ def _absolute_meshdir(spec: mujoco.MjSpec) -> None:
     root = pathlib.Path(spec.modelfiledir)
     candidates = [root / spec.meshdir] if spec.meshdir else [root, root / "assets"]
     first = next(iter(spec.meshes), None)
+    if first is None:
+        return
     for folder in candidates:
-        if first is None or (folder / first.file).is_file():
+        if (folder / first.file).is_file():
             spec.meshdir = str(folder.resolve())
             return
     raise RobotModelError(f"cannot find mesh {first.file!r} under {[str(c) for c in candidates]}")
