@@ -1,0 +1,238 @@
+"""Check results and the check report: the model's feedback, as data and as Markdown.
+
+Design rule: a report is a plain dict valid against `check_report.schema.json`; checks appear
+in a fixed order (interface, schema, property, domain, image; within a category, the order the
+suite declares), `first_failure` is the first failing one, and nothing in it depends on the
+machine or the moment except the `duration_s` fields, so the same draft checked twice gives
+the same report once those are left out (`comparable`). `report_markdown` renders the short,
+specific text that goes into the model's prompt.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from contracts.validate import to_jsonable, validate
+
+Category = Literal["interface", "schema", "property", "domain", "image"]
+Status = Literal["passed", "failed", "error", "skipped"]
+CATEGORIES: tuple[str, ...] = ("interface", "schema", "property", "domain", "image")
+FUNCTIONS = ("render", "perceive", "relate", "plan")
+MAX_TRACEBACK = 2500  # [chars] kept of a traceback (its end)
+MAX_TEXT = 1500  # [chars] of a message
+MAX_JSON = 6000  # [chars] of a JSON value shown (expected, actual, counterexample)
+
+
+@dataclass(kw_only=True)
+class CheckResult:
+    """One check's outcome (see `check_report.schema.json` for the fields)."""
+
+    name: str
+    category: Category
+    status: Status = "passed"
+    message: str = ""
+    expected: Any = None
+    actual: Any = None
+    counterexample: Any = None
+    seed: int | None = None
+    examples: int | None = None
+    traceback: str = ""
+    metrics: dict[str, float | None] = field(default_factory=dict)
+    images: list[dict[str, str]] = field(default_factory=list)
+    duration_s: float | None = None
+
+    @property
+    def failing(self) -> bool:
+        return self.status in ("failed", "error")
+
+    def fail(self, message: str, **fields: Any) -> CheckResult:
+        self.status = "failed"
+        self.message = message
+        for k, v in fields.items():
+            setattr(self, k, v)
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"name": self.name, "category": self.category, "status": self.status}
+        if self.message:
+            d["message"] = _clip(self.message, MAX_TEXT)
+        for key in ("expected", "actual", "counterexample"):
+            value = getattr(self, key)
+            if value is not None:
+                d[key] = jsonable(value)
+        if self.seed is not None:
+            d["seed"] = int(self.seed)
+        if self.examples is not None:
+            d["examples"] = int(self.examples)
+        if self.traceback:
+            d["traceback"] = trim_traceback(self.traceback)
+        if self.metrics:
+            d["metrics"] = {k: _metric(v) for k, v in sorted(self.metrics.items())}
+        if self.images:
+            d["images"] = [dict(i) for i in self.images]
+        if self.duration_s is not None:
+            d["duration_s"] = round(max(0.0, float(self.duration_s)), 3)
+        return d
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> CheckResult:
+        return CheckResult(**{k: v for k, v in d.items()})
+
+
+def _metric(v: Any) -> float | None:
+    if v is None:
+        return None
+    f = float(v)
+    return None if not math.isfinite(f) else round(f, 6)
+
+
+def _clip(text: str, n: int) -> str:
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def trim_traceback(tb: str, limit: int = MAX_TRACEBACK) -> str:
+    """The end of a traceback (where the error is), at most `limit` characters."""
+    tb = tb.strip()
+    if len(tb) <= limit:
+        return tb
+    return "…\n" + tb[-(limit - 2) :]
+
+
+def jsonable(value: Any, digits: int = 6) -> Any:
+    """A JSON value: arrays as lists, floats rounded to `digits` decimals, non-finite as None."""
+    value = to_jsonable(value)
+    if isinstance(value, float):
+        return round(value, digits) + 0.0 if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): jsonable(v, digits) for k, v in value.items()}
+    if isinstance(value, list):
+        return [jsonable(v, digits) for v in value]
+    if isinstance(value, bool | int | str) or value is None:
+        return value
+    return repr(value)
+
+
+def order_checks(checks: Iterable[CheckResult | Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Check dicts sorted by category (stable within a category)."""
+    dicts = [c.to_dict() if isinstance(c, CheckResult) else dict(c) for c in checks]
+    return sorted(dicts, key=lambda c: CATEGORIES.index(c["category"]))
+
+
+def build_report(
+    *,
+    domain: str,
+    function: str,
+    source: str,
+    checks: Sequence[CheckResult | Mapping[str, Any]],
+    duration_s: float | None = None,
+) -> dict[str, Any]:
+    """The check report dict (validated against its schema)."""
+    ordered = order_checks(checks)
+    failing = [c["name"] for c in ordered if c["status"] in ("failed", "error")]
+    report: dict[str, Any] = {
+        "schema_version": 1,
+        "domain": domain,
+        "function": function,
+        "passed": not failing,
+        "draft_sha256": hashlib.sha256(source.encode()).hexdigest(),
+        "first_failure": failing[0] if failing else None,
+        "checks": ordered,
+    }
+    if duration_s is not None:
+        report["duration_s"] = round(max(0.0, duration_s), 3)
+    validate("check_report", report)
+    return report
+
+
+def comparable(report: Mapping[str, Any]) -> dict[str, Any]:
+    """The report without its timings: equal for equal drafts checked on equal inputs."""
+    out = {k: v for k, v in report.items() if k != "duration_s"}
+    out["checks"] = [{k: v for k, v in c.items() if k != "duration_s"} for c in report["checks"]]
+    return out
+
+
+# -- Markdown for the prompt --------------------------------------------------------------------
+
+
+def _short_json(value: Any, limit: int = 1200) -> str:
+    text = json.dumps(value, separators=(", ", ": "))
+    return _clip(text, limit)
+
+
+def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
+    """Short, specific Markdown of a report for the model: what failed first, why, on what.
+
+    The first failing check is shown in full (message, expected vs actual, the shrunk
+    counterexample, the traceback, images); up to `max_failures - 1` further failures get one
+    line each; passing checks are only counted.
+    """
+    fn, checks = report["function"], report["checks"]
+    passed = sum(c["status"] == "passed" for c in checks)
+    failing = [c for c in checks if c["status"] in ("failed", "error")]
+    skipped = sum(c["status"] == "skipped" for c in checks)
+    if not failing:
+        return f"**`{fn}` passed all {passed} checks** ({report['domain']})."
+    lines = [
+        f"**`{fn}` failed {len(failing)} of {len(checks)} checks** "
+        f"({passed} passed{f', {skipped} skipped' if skipped else ''})."
+    ]
+    first = failing[0]
+    lines += ["", f"### First failure: `{first['name']}` ({first['category']})"]
+    if first.get("message"):
+        lines += ["", first["message"]]
+    if "expected" in first:
+        lines += ["", f"- expected: `{_short_json(first['expected'], 600)}`"]
+    if "actual" in first:
+        lines += [f"- actual: `{_short_json(first['actual'], 600)}`"]
+    if first.get("metrics"):
+        shown = ", ".join(
+            f"{k} = {'n/a' if v is None else f'{v:.4g}'}" for k, v in first["metrics"].items()
+        )
+        lines += [f"- metrics: {shown}"]
+    if "counterexample" in first:
+        lines += [
+            "",
+            "Smallest failing input found"
+            + (f" (seed {first['seed']})" if "seed" in first else "")
+            + ":",
+            "```json",
+            _short_json(first["counterexample"], 2500),
+            "```",
+        ]
+    if first.get("traceback"):
+        lines += ["", "Traceback (end):", "```", trim_traceback(first["traceback"], 1500), "```"]
+    for img in first.get("images", []):
+        lines += [
+            "",
+            f"Image: `{img['path']}`" + (f": {img['caption']}" if img.get("caption") else ""),
+        ]
+    rest = failing[1:max_failures]
+    if rest:
+        lines += ["", "Also failing:"]
+        for c in rest:
+            msg = _clip(c.get("message", "").splitlines()[0] if c.get("message") else "", 300)
+            lines += [f"- `{c['name']}` ({c['category']}): {msg}"]
+        if len(failing) > max_failures:
+            lines += [f"- … and {len(failing) - max_failures} more"]
+    return "\n".join(lines)
+
+
+def images_of(report: Mapping[str, Any]) -> list[str]:
+    """Paths of every image a report refers to, failing checks first."""
+    checks = sorted(report["checks"], key=lambda c: c["status"] not in ("failed", "error"))
+    return [i["path"] for c in checks for i in c.get("images", [])]
+
+
+def array_digest(a: np.ndarray) -> str:
+    """A short content hash of an array (shape, dtype and bytes)."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.sha256(f"{a.shape}{a.dtype}".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()[:16]

@@ -1,0 +1,294 @@
+"""The `plan` suite: schema, reaching the goal physically, length, identity, determinism,
+explicit infeasibility.
+
+Instances come from the domain's instance generator; hypothesis varies them — both scenes
+moved together, or the goal made a translation of the start (every object must move, often
+onto another's spot) — and shrinks towards the first instance as generated. A plan is applied
+with `contracts.checks.physics`: every step must pick a clear object and leave a collision-free,
+supported state inside the workspace, and the last state must match the goal within the
+domain's tolerance. The states' relations come from the frozen `relate` when the job carries
+it, else from the domain's reference relations (computed on the host).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hypothesis import strategies as st
+
+from contracts.checks._hypo import Failure, run_property
+from contracts.checks.physics import apply_plan
+from contracts.checks.report import CheckResult
+from contracts.checks.suite import SuiteContext
+from contracts.checks.suites._common import (
+    copy_records,
+    first_difference,
+    raised,
+    run_check,
+    same_value,
+    scene_spec,
+    translated,
+)
+from contracts.errors import ContractError
+from contracts.validate import validate
+
+VARIANTS = ("as_generated", "both_moved", "goal_is_moved_start")
+
+
+def _state(ctx: SuiteContext, records: list[dict], reference: Any) -> dict[str, Any]:
+    relate = ctx.dependency("relate")
+    if relate is None:
+        return {"objects": copy_records(records), "relations": reference}
+    res = ctx.call(records, ctx.spec.fresh_meshes(), fn=relate, label="the frozen relate")
+    if not res.ok:
+        raise Failure(
+            message=f"the frozen relate {res.describe()} on this state, so plan could not be "
+            "checked on it",
+            traceback=res.traceback,
+            error=True,
+        )
+    return {"objects": copy_records(records), "relations": res.value}
+
+
+def variant(ctx: SuiteContext, x: tuple) -> tuple[list, list, Any, Any, str] | None:
+    """(start, goal, start relations, goal relations, description) for a drawn input, or None
+    when the variant leaves the workspace."""
+    i, kind, dx, dy = x
+    inst = ctx.cases["instances"][i]
+    s, g = inst["start"], inst["goal"]
+    if kind == "as_generated":
+        return s, g, inst["start_relations"], inst["goal_relations"], f"instance {inst['name']}"
+    if kind == "both_moved":
+        s, g = translated(s, dx / 1000, dy / 1000), translated(g, dx / 1000, dy / 1000)
+        what = f"instance {inst['name']} with both scenes moved by ({dx}, {dy}) mm"
+        rs, rg = inst["start_relations"], inst["goal_relations"]
+    else:
+        if dx == 0 and dy == 0:
+            dx = 25
+        g = translated(s, dx / 1000, dy / 1000)
+        what = f"the start of instance {inst['name']} as start, moved by ({dx}, {dy}) mm as goal"
+        rs = rg = inst["start_relations"]
+    ws = ctx.spec.workspace
+    for recs in (s, g):
+        for b in ctx.spec.geometry.bodies(recs):
+            if ws.outside(b.vertices) is not None:
+                return None
+    return s, g, rs, rg, what
+
+
+def plan_of(ctx: SuiteContext, x: tuple) -> tuple[Any, Any] | None:
+    """(CallResult of plan, the variant) for a drawn input, cached; None outside the workspace."""
+    key = ("plan", x)
+    if key not in ctx.cache:
+        v = variant(ctx, x)
+        if v is None:
+            ctx.cache[key] = None
+        else:
+            s, g, rs, rg, what = v
+            start, goal = _state(ctx, s, rs), _state(ctx, g, rg)
+            ctx.cache[key] = (ctx.call(start, goal, label=what), v)
+    return ctx.cache[key]
+
+
+def _counterexample(ctx: SuiteContext, start: list, goal: list) -> dict[str, Any]:
+    return {"start": scene_spec(ctx.spec.name, start), "goal": scene_spec(ctx.spec.name, goal)}
+
+
+def _schema_problem(ctx: SuiteContext, value: Any, ids: set[str]) -> str:
+    try:
+        data = validate("plan", value)
+    except ContractError as e:
+        return str(e)
+    for k, step in enumerate(data.get("steps", [])):
+        if step["object"] not in ids:
+            return f"steps[{k}].object: unknown object '{step['object']}'; known: {sorted(ids)}"
+    return ""
+
+
+def checks(ctx: SuiteContext) -> list[CheckResult]:
+    instances = ctx.cases["instances"]
+    n = len(instances)
+    spec = ctx.spec
+    pool = [(i, "as_generated", 0, 0) for i in range(n)]
+    out: list[CheckResult] = []
+
+    def schema(r: CheckResult) -> None:
+        for x in pool:
+            res, (s, g, *_rest) = plan_of(ctx, x)
+            ce = _counterexample(ctx, s, g)
+            if not res.ok:
+                raise raised("plan(start, goal)", res, ce)
+            problem = _schema_problem(ctx, res.value, {str(o["id"]) for o in s})
+            if problem:
+                raise Failure(
+                    message=f"the plan returned is not a plan: {problem}",
+                    actual=problem,
+                    counterexample=ce,
+                )
+        r.examples = len(pool)
+
+    out.append(
+        run_check(
+            "schema.output",
+            "schema",
+            schema,
+            expected='{"status": "ok", "steps": [{"object": id, "target_pose": 4x4}]} or '
+            '{"status": "infeasible", "reason": str}',
+        )
+    )
+
+    def reaches(x: tuple) -> Failure | None:
+        got = plan_of(ctx, x)
+        if got is None:
+            return None  # the drawn variant leaves the workspace: nothing to check
+        res, (s, g, _, _, what) = got
+        ce = _counterexample(ctx, s, g)
+        if not res.ok:
+            return raised(f"plan on {what}", res, ce)
+        problem = _schema_problem(ctx, res.value, {str(o["id"]) for o in s})
+        if problem:
+            return Failure(message=f"on {what}: not a plan: {problem}", counterexample=ce)
+        value = res.value
+        if value["status"] != "ok":
+            return Failure(
+                message=f"plan says infeasible on {what} ({value.get('reason', '')!r}), but the "
+                "goal is reachable",
+                expected="status ok",
+                actual=value,
+                counterexample=ce,
+            )
+        outcome = apply_plan(
+            spec.geometry,
+            s,
+            value["steps"],
+            g,
+            trans_tol=spec.trans_tol,
+            rot_tol=spec.rot_tol,
+            symmetries=spec.symmetries,
+            workspace=spec.workspace,
+        )
+        if outcome.problem is not None:
+            p = outcome.problem
+            shown = value["steps"][: (p.step + 1) if p.step is not None else None]
+            return Failure(
+                message=f"on {what}: {p.message}",
+                expected="every step picks a clear object and leaves a collision-free, "
+                "supported state inside the workspace; the last state matches the goal",
+                actual={"problem": p.kind, "steps": shown},
+                counterexample=ce,
+            )
+        return None
+
+    def reaches_check(r: CheckResult) -> None:
+        strategy = st.tuples(
+            st.integers(0, n - 1),
+            st.sampled_from(VARIANTS),
+            st.integers(-60, 60),
+            st.integers(-60, 60),
+        )
+        outcome = run_property(
+            reaches,
+            strategy,
+            max_examples=ctx.examples("plan") + len(pool),
+            seed=ctx.seed,
+            examples=[*pool, (0, "goal_is_moved_start", 25, 0)],
+            shrink_calls=int(ctx.budget.get("shrink_calls", 20)),
+        )
+        r.examples = outcome.examples
+        if outcome.failure:
+            raise outcome.failure
+
+    out.append(run_check("property.reaches_goal", "property", reaches_check, seed=ctx.seed))
+
+    def bounded(r: CheckResult) -> None:
+        for x in pool:
+            res, (s, g, *_rest) = plan_of(ctx, x)
+            if not res.ok or not isinstance(res.value, dict) or res.value.get("status") != "ok":
+                continue
+            steps = res.value.get("steps", [])
+            order = instances[x[0]].get("order_len")
+            bound = max(3 * len(s), 2 * int(order or 0))
+            if len(steps) > bound:
+                raise Failure(
+                    message=f"the plan has {len(steps)} steps for {len(s)} objects; at most "
+                    f"{bound} are allowed (the domain's reference order has {order})",
+                    expected=f"<= {bound} steps",
+                    actual=f"{len(steps)} steps",
+                    counterexample=_counterexample(ctx, s, g),
+                )
+        r.examples = len(pool)
+
+    out.append(run_check("property.plan_length_bounded", "property", bounded))
+
+    def identity(r: CheckResult) -> None:
+        k = min(n, ctx.examples("identity"))
+        for i in range(k):
+            inst = instances[i]
+            for side in ("start", "goal"):
+                recs, rel = inst[side], inst[f"{side}_relations"]
+                res = ctx.call(_state(ctx, recs, rel), _state(ctx, recs, rel), label="plan(s, s)")
+                ce = {"start": scene_spec(spec.name, recs), "goal": "the same scene"}
+                if not res.ok:
+                    raise raised("plan(s, s)", res, ce)
+                v = res.value
+                if not (isinstance(v, dict) and v.get("status") == "ok" and not v.get("steps")):
+                    raise Failure(
+                        message="plan(s, s) must be {'status': 'ok', 'steps': []}: the goal is "
+                        "already reached",
+                        expected={"status": "ok", "steps": []},
+                        actual=v,
+                        counterexample=ce,
+                    )
+        r.examples = 2 * k
+
+    out.append(run_check("property.identity_plan_empty", "property", identity))
+
+    def deterministic(r: CheckResult) -> None:
+        k = min(n, ctx.examples("determinism"))
+        for i in range(k):
+            inst = instances[i]
+            a, b = (
+                ctx.call(
+                    _state(ctx, inst["start"], inst["start_relations"]),
+                    _state(ctx, inst["goal"], inst["goal_relations"]),
+                    label=f"instance {inst['name']}",
+                )
+                for _ in range(2)
+            )
+            if a.ok and b.ok and not same_value(a.value, b.value):
+                raise Failure(
+                    message="plan gave two different plans for the same start and goal (first "
+                    f"difference at {first_difference(a.value, b.value)})",
+                    counterexample=_counterexample(ctx, inst["start"], inst["goal"]),
+                )
+        r.examples = k
+
+    out.append(run_check("property.deterministic", "property", deterministic))
+
+    def infeasible(r: CheckResult) -> None:
+        for case in ctx.cases.get("infeasible", []):
+            start = _state(ctx, case["start"], case["start_relations"])
+            goal = _state(ctx, case["goal"], case["goal_relations"])
+            res = ctx.call(start, goal, label=f"infeasible case {case['name']}")
+            ce = _counterexample(ctx, case["start"], case["goal"])
+            ce["why_no_plan_exists"] = case["why"]
+            if not res.ok:
+                raise raised(
+                    "plan must return {'status': 'infeasible', 'reason': ...} when no plan "
+                    "exists, but it",
+                    res,
+                    ce,
+                )
+            v = res.value
+            if not (isinstance(v, dict) and v.get("status") == "infeasible"):
+                raise Failure(
+                    message=f"no plan can reach this goal ({case['why']}), yet plan did not say "
+                    "infeasible",
+                    expected={"status": "infeasible", "reason": "..."},
+                    actual=v if not isinstance(v, dict) else {**v, "steps": v.get("steps", [])[:3]},
+                    counterexample=ce,
+                )
+        r.examples = len(ctx.cases.get("infeasible", []))
+
+    out.append(run_check("property.infeasible_explicit", "property", infeasible))
+    return out

@@ -1,0 +1,223 @@
+"""The `relate` suite: schema, declared vocabulary, determinism, order and translation invariance.
+
+Scenes come from the domain's instance generator (starts and goals); the invariance properties
+draw a scene, a record order or a horizontal translation with hypothesis and shrink towards
+the first scene, the identity order and no translation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hypothesis import strategies as st
+
+from contracts.checks._hypo import Failure, run_property
+from contracts.checks.report import CheckResult
+from contracts.checks.suite import SuiteContext
+from contracts.checks.suites._common import (
+    edge_multiset,
+    first_difference,
+    order_from_keys,
+    order_keys,
+    permuted,
+    raised,
+    run_check,
+    same_value,
+    scene_spec,
+    translated,
+)
+from contracts.errors import ContractError
+from contracts.validate import validate
+
+
+def relations_of(ctx: SuiteContext, records: list[dict], label: str) -> Any:
+    """relate(records) as a CallResult, cached by label for the checks that share inputs."""
+    key = ("relate", label)
+    if key not in ctx.cache:
+        ctx.cache[key] = ctx.call(records, ctx.spec.fresh_meshes(), label=label)
+    return ctx.cache[key]
+
+
+def _schema_problem(graph: Any, records: list[dict]) -> str:
+    try:
+        validate("relations", graph)
+    except ContractError as e:
+        return str(e)
+    nodes = sorted(str(n["id"]) for n in graph["nodes"])
+    ids = sorted(str(r["id"]) for r in records)
+    if nodes != ids:
+        return f"nodes must be exactly the record ids {ids}, got {nodes}"
+    return ""
+
+
+def checks(ctx: SuiteContext) -> list[CheckResult]:
+    scenes = ctx.cases["scenes"]
+    domain = ctx.spec.name
+    out: list[CheckResult] = []
+
+    def base(i: int) -> Any:
+        return relations_of(ctx, scenes[i]["records"], f"scene {scenes[i]['name']}")
+
+    def schema(r: CheckResult) -> None:
+        for i, sc in enumerate(scenes):
+            res = base(i)
+            ce = scene_spec(domain, sc["records"])
+            if not res.ok:
+                raise raised("relate(records)", res, ce)
+            problem = _schema_problem(res.value, sc["records"])
+            if problem:
+                raise Failure(
+                    message=f"the graph returned for scene {sc['name']} is not a relation graph: "
+                    f"{problem}",
+                    actual=problem,
+                    counterexample=ce,
+                )
+        r.examples = len(scenes)
+
+    out.append(
+        run_check(
+            "schema.output",
+            "schema",
+            schema,
+            expected="networkx node-link JSON (edges='edges') of a directed multigraph whose "
+            "nodes are the record ids, each edge with a 'type'",
+        )
+    )
+    schema_ok = not out[-1].failing
+
+    def declared(r: CheckResult) -> None:
+        rel = getattr(ctx.draft, "RELATIONS", None)
+        if not isinstance(rel, dict) or not rel:
+            raise Failure(
+                message="the module must define RELATIONS: a non-empty dict {edge type: meaning}",
+                actual=type(rel).__name__ if rel is not None else "not defined",
+            )
+        bad = [k for k, v in rel.items() if not isinstance(k, str) or not isinstance(v, str)]
+        if bad:
+            raise Failure(message=f"RELATIONS maps str to str; bad entries: {bad!r}")
+        for i, sc in enumerate(scenes):
+            res = base(i)
+            if not res.ok:
+                continue
+            types = sorted({t for (_, _, t) in edge_multiset(res.value)} - set(rel))
+            if types:
+                raise Failure(
+                    message=f"edge types {types} are not declared in RELATIONS ({sorted(rel)})",
+                    expected=sorted(rel),
+                    actual=types,
+                    counterexample=scene_spec(domain, sc["records"]),
+                )
+        r.examples = len(scenes)
+
+    out.append(run_check("property.relations_declared", "property", declared))
+
+    def deterministic(r: CheckResult) -> None:
+        n = min(len(scenes), ctx.examples("determinism"))
+        for i in range(n):
+            again = ctx.call(scenes[i]["records"], ctx.spec.fresh_meshes(), label="again")
+            first = base(i)
+            if not (first.ok and again.ok):
+                continue
+            if not same_value(first.value, again.value):
+                raise Failure(
+                    message="relate gave two different graphs for the same records (at "
+                    f"{first_difference(first.value, again.value)})",
+                    counterexample=scene_spec(domain, scenes[i]["records"]),
+                )
+        r.examples = n
+
+    out.append(run_check("property.deterministic", "property", deterministic))
+
+    n = len(scenes)
+
+    def order_prop(x: tuple) -> Failure | None:
+        i, keys = x
+        recs = scenes[i]["records"]
+        order = order_from_keys(keys, len(recs))
+        shuffled = permuted(recs, order)
+        a, b = base(i), relations_of(ctx, shuffled, f"scene {scenes[i]['name']} order {order}")
+        ce = {"scene": scene_spec(domain, shuffled), "order": [recs[k]["id"] for k in order]}
+        for res in (a, b):
+            if not res.ok:
+                return raised("relate(records)", res, ce)
+        ea, eb = edge_multiset(a.value), edge_multiset(b.value)
+        if ea != eb:
+            return Failure(
+                message="relate depends on the order of the records: the same scene with its "
+                "records reordered gives other edges",
+                expected=sorted(ea.elements()),
+                actual=sorted(eb.elements()),
+                counterexample=ce,
+            )
+        return None
+
+    def order_check(r: CheckResult) -> None:
+        strategy = st.tuples(
+            st.integers(0, n - 1), order_keys(max(len(s["records"]) for s in scenes))
+        )
+        outcome = run_property(
+            order_prop, strategy, max_examples=ctx.examples("order"), seed=ctx.seed
+        )
+        r.examples = outcome.examples
+        if outcome.failure:
+            raise outcome.failure
+
+    def translation_prop(x: tuple) -> Failure | None:
+        i, dx, dy = x
+        if dx == 0 and dy == 0:
+            return None
+        recs = scenes[i]["records"]
+        moved = translated(recs, dx / 1000, dy / 1000)
+        a = base(i)
+        b = relations_of(ctx, moved, f"scene {scenes[i]['name']} moved by ({dx}, {dy}) mm")
+        ce = {"scene": scene_spec(domain, moved), "translation_m": [dx / 1000, dy / 1000, 0.0]}
+        for res in (a, b):
+            if not res.ok:
+                return raised("relate(records)", res, ce)
+        ea, eb = edge_multiset(a.value), edge_multiset(b.value)
+        if ea != eb:
+            return Failure(
+                message=f"relate is not invariant to a common horizontal translation: moving "
+                f"every record by ({dx}, {dy}) mm changes the edges",
+                expected=sorted(ea.elements()),
+                actual=sorted(eb.elements()),
+                counterexample=ce,
+            )
+        return None
+
+    def translation_check(r: CheckResult) -> None:
+        reach = int(ctx.budget.get("translation_mm", 150))
+        strategy = st.tuples(
+            st.integers(0, n - 1), st.integers(-reach, reach), st.integers(-reach, reach)
+        )
+        outcome = run_property(
+            translation_prop,
+            strategy,
+            max_examples=ctx.examples("translation"),
+            seed=ctx.seed,
+            examples=[(0, 97, -61)],
+        )
+        r.examples = outcome.examples
+        if outcome.failure:
+            raise outcome.failure
+
+    if schema_ok:
+        out.append(
+            run_check("property.record_order_invariant", "property", order_check, seed=ctx.seed)
+        )
+        out.append(
+            run_check(
+                "property.translation_invariant", "property", translation_check, seed=ctx.seed
+            )
+        )
+    else:
+        for name in ("property.record_order_invariant", "property.translation_invariant"):
+            out.append(
+                CheckResult(
+                    name=name,
+                    category="property",
+                    status="skipped",
+                    message="skipped: the output does not pass its schema",
+                )
+            )
+    return out

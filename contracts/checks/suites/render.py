@@ -1,0 +1,229 @@
+"""The `render` suite: output schema, determinism, empty scenes, mask indices follow the records.
+
+The image comparison against the simulator (silhouette IoU and depth error per object) runs on
+the host, on the renders returned here under ``outputs["renders"]``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from hypothesis import strategies as st
+
+from contracts.checks._hypo import Failure, run_property
+from contracts.checks.report import CheckResult
+from contracts.checks.suite import SuiteContext
+from contracts.checks.suites._common import (
+    copy_records,
+    order_from_keys,
+    order_keys,
+    permuted,
+    raised,
+    run_check,
+    scene_spec,
+)
+from contracts.validate import to_jsonable
+
+AGREEMENT = 0.995  # share of pixels that must agree when only the record order changed
+
+
+def render_of(ctx: SuiteContext, records: list[dict], camera: dict, label: str) -> Any:
+    key = ("render", label)
+    if key not in ctx.cache:
+        ctx.cache[key] = ctx.call(
+            copy_records(records), ctx.spec.fresh_meshes(), camera, label=label
+        )
+    return ctx.cache[key]
+
+
+def output_problem(value: Any, camera: dict, n: int) -> str:
+    """Why a render output breaks the contract ('' when it does not)."""
+    if not isinstance(value, dict):
+        return f"must return a dict with 'rgb', 'depth', 'mask', not {type(value).__name__}"
+    missing = [k for k in ("rgb", "depth", "mask") if k not in value]
+    if missing:
+        return f"the returned dict lacks {missing}"
+    h, w = int(camera["height"]), int(camera["width"])
+    try:
+        rgb, depth, mask = (np.asarray(value[k]) for k in ("rgb", "depth", "mask"))
+    except Exception as e:
+        return f"outputs are not arrays ({e})"
+    if rgb.shape != (h, w, 3) or rgb.dtype != np.uint8:
+        return f"rgb must be ({h}, {w}, 3) uint8 for this camera, got {rgb.shape} {rgb.dtype}"
+    if depth.shape != (h, w) or depth.dtype.kind != "f":
+        return f"depth must be ({h}, {w}) float [m], got {depth.shape} {depth.dtype}"
+    if not np.all(np.isfinite(depth)) or depth.min() < 0:
+        return "depth must be finite and >= 0 (0 where nothing is seen)"
+    if mask.shape != (h, w) or mask.dtype.kind not in "iu":
+        return f"mask must be ({h}, {w}) int, got {mask.shape} {mask.dtype}"
+    if mask.size and (mask.min() < -1 or mask.max() >= n):
+        return (
+            f"mask values must be record indices 0..{n - 1} or -1, got {mask.min()}..{mask.max()}"
+        )
+    return ""
+
+
+def checks(ctx: SuiteContext) -> list[CheckResult]:
+    scenes = ctx.cases["scenes"]
+    domain = ctx.spec.name
+    out: list[CheckResult] = []
+    renders: dict[str, Any] = {}
+    ctx.outputs["renders"] = renders
+
+    def base(i: int) -> Any:
+        sc = scenes[i]
+        return render_of(ctx, sc["records"], sc["camera"], f"scene {sc['name']}")
+
+    def schema(r: CheckResult) -> None:
+        for i, sc in enumerate(scenes):
+            res = base(i)
+            ce = {"scene": scene_spec(domain, sc["records"]), "camera": to_jsonable(sc["camera"])}
+            if not res.ok:
+                raise raised("render(records, meshes, camera)", res, ce)
+            problem = output_problem(res.value, sc["camera"], len(sc["records"]))
+            if problem:
+                raise Failure(message=problem, actual=problem, counterexample=ce)
+            if sc.get("image"):
+                renders[sc["name"]] = {
+                    k: np.asarray(res.value[k]) for k in ("rgb", "depth", "mask")
+                }
+        r.examples = len(scenes)
+
+    out.append(
+        run_check(
+            "schema.output",
+            "schema",
+            schema,
+            expected="{'rgb': (H, W, 3) uint8, 'depth': (H, W) float [m], 'mask': (H, W) int} "
+            "at the camera's size",
+        )
+    )
+    if out[-1].failing:
+        for name in (
+            "property.deterministic",
+            "property.empty_scene",
+            "property.depth_where_visible",
+            "property.mask_follows_record_order",
+        ):
+            out.append(
+                CheckResult(
+                    name=name,
+                    category="property",
+                    status="skipped",
+                    message="skipped: the output does not pass its schema",
+                )
+            )
+        return out
+
+    def deterministic(r: CheckResult) -> None:
+        sc = scenes[0]
+        again = ctx.call(copy_records(sc["records"]), ctx.spec.fresh_meshes(), sc["camera"])
+        first = base(0)
+        ce = {"scene": scene_spec(domain, sc["records"]), "camera": to_jsonable(sc["camera"])}
+        if not again.ok:
+            raise raised("render (second call)", again, ce)
+        for k in ("rgb", "depth", "mask"):
+            a, b = np.asarray(first.value[k]), np.asarray(again.value[k])
+            if a.shape != b.shape or not np.array_equal(a, b):
+                raise Failure(
+                    message=f"two renders of the same records differ in '{k}'",
+                    counterexample=ce,
+                )
+        r.examples = 1
+
+    out.append(run_check("property.deterministic", "property", deterministic))
+
+    def empty(r: CheckResult) -> None:
+        cam = scenes[0]["camera"]
+        res = ctx.call([], ctx.spec.fresh_meshes(), cam, label="no records")
+        ce = {"scene": scene_spec(domain, []), "camera": to_jsonable(cam)}
+        if not res.ok:
+            raise raised("render([], meshes, camera)", res, ce)
+        problem = output_problem(res.value, cam, 0)
+        if problem:
+            raise Failure(message=f"with no records: {problem}", counterexample=ce)
+        mask, depth = np.asarray(res.value["mask"]), np.asarray(res.value["depth"])
+        if (mask != -1).any() or (depth != 0).any():
+            raise Failure(
+                message="with no records, the mask must be -1 and the depth 0 everywhere",
+                actual={
+                    "mask_pixels_not_minus_1": int((mask != -1).sum()),
+                    "depth_pixels_not_0": int((depth != 0).sum()),
+                },
+                counterexample=ce,
+            )
+        r.examples = 1
+
+    out.append(run_check("property.empty_scene", "property", empty))
+
+    def visible_depth(r: CheckResult) -> None:
+        for i, sc in enumerate(scenes):
+            v = base(i).value
+            mask, depth = np.asarray(v["mask"]), np.asarray(v["depth"])
+            bad = int(((mask >= 0) & ~(depth > 0)).sum())
+            if bad > 0.001 * max(1, int((mask >= 0).sum())):
+                raise Failure(
+                    message=f"{bad} pixels show an object in the mask but have no depth",
+                    counterexample={"scene": scene_spec(domain, sc["records"])},
+                )
+        r.examples = len(scenes)
+
+    out.append(run_check("property.depth_where_visible", "property", visible_depth))
+
+    def order_prop(x: tuple) -> Failure | None:
+        i, keys = x
+        sc = scenes[i]
+        order = order_from_keys(keys, len(sc["records"]))
+        if order == sorted(order):
+            return None
+        shuffled = permuted(sc["records"], order)
+        res = render_of(ctx, shuffled, sc["camera"], f"scene {sc['name']} order {order}")
+        ce = {
+            "scene": scene_spec(domain, shuffled),
+            "camera": to_jsonable(sc["camera"]),
+            "order": [sc["records"][k]["id"] for k in order],
+        }
+        if not res.ok:
+            return raised("render(records)", res, ce)
+        problem = output_problem(res.value, sc["camera"], len(shuffled))
+        if problem:
+            return Failure(message=problem, counterexample=ce)
+        a, b = np.asarray(base(i).value["mask"]), np.asarray(res.value["mask"])
+        # record k of the original list is record order.index(k) of the shuffled one
+        lut = np.full(len(order) + 1, -1)
+        for new, old in enumerate(order):
+            lut[old] = new
+        expected = np.where(a >= 0, lut[np.clip(a, 0, len(order))], -1)
+        agree = float((expected == b).mean())
+        if agree < AGREEMENT:
+            return Failure(
+                message="the mask must hold each pixel's index in the records list as given: "
+                f"after reordering the records only {100 * agree:.1f}% of the mask's pixels "
+                "point at the same objects",
+                expected=f">= {100 * AGREEMENT:.1f}% of pixels agree",
+                actual=f"{100 * agree:.1f}%",
+                counterexample=ce,
+            )
+        return None
+
+    def order_check(r: CheckResult) -> None:
+        n_keys = max(len(s["records"]) for s in scenes)
+        strategy = st.tuples(st.integers(0, len(scenes) - 1), order_keys(n_keys))
+        reverse = tuple(min(9, k) for k in range(n_keys - 1, -1, -1))
+        outcome = run_property(
+            order_prop,
+            strategy,
+            max_examples=ctx.examples("order"),
+            seed=ctx.seed,
+            examples=[(0, reverse)],
+            shrink_calls=int(ctx.budget.get("shrink_calls", 20)),
+        )
+        r.examples = outcome.examples
+        if outcome.failure:
+            raise outcome.failure
+
+    out.append(
+        run_check("property.mask_follows_record_order", "property", order_check, seed=ctx.seed)
+    )
+    return out
