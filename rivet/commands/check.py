@@ -1,0 +1,118 @@
+"""`rivet check DOMAIN FUNCTION FILE.py`: one draft's full checks in the sandbox; prints the report.
+
+Exit 0 when every check passes, 1 when one fails, 2 for bad input (an unknown domain or
+function, an unreadable file). The functions the draft depends on come from `--deps DIR`
+(`DIR/<name>.py`, e.g. the frozen `artifacts/cubes/`); where none is given, the domain's ground
+truth stands in for them (its reference relations when checking `plan`, the toolbox renderer
+when re-rendering what `perceive` found).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from contracts.errors import UsageError
+
+FUNCTIONS = ("render", "perceive", "relate", "plan")
+# Whose source a function's checks load as modules (DESIGN's table; agent.dag declares it too).
+CODE_DEPS: dict[str, tuple[str, ...]] = {
+    "render": (),
+    "perceive": ("render",),
+    "relate": ("render",),
+    "plan": ("relate",),
+}
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "check",
+        help="run one draft's full checks in the sandbox and print the report (exit 0 pass, 1 fail)",
+        description=__doc__,
+    )
+    p.add_argument("domain", metavar="DOMAIN")
+    p.add_argument("function", choices=FUNCTIONS, metavar="FUNCTION", help=", ".join(FUNCTIONS))
+    p.add_argument("file", type=Path, metavar="FILE.py")
+    p.add_argument("--thorough", action="store_true", help="more instances and examples (slower)")
+    p.add_argument(
+        "--deps",
+        type=Path,
+        metavar="DIR",
+        help="folder holding the frozen functions the draft depends on, as <name>.py",
+    )
+    p.add_argument(
+        "--sandbox",
+        choices=("docker", "local"),
+        default="docker",
+        help="backend (default docker; local isolates nothing and says so)",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="where overlay images go (default runs/checks/DOMAIN/FUNCTION-<draft hash>)",
+    )
+    p.add_argument("--json", action="store_true", help="print the report as JSON instead")
+    p.set_defaults(handler=run)
+
+
+def _read(path: Path, what: str) -> str:
+    try:
+        return path.read_text()
+    except OSError as e:
+        raise UsageError(f"cannot read {what} {path}: {e.strerror}") from None
+
+
+def dependencies(function: str, folder: Path | None) -> dict[str, str]:
+    """The dependency sources found in `folder` ({} without one)."""
+    if folder is None:
+        return {}
+    if not folder.is_dir():
+        raise UsageError(f"--deps {folder}: not a folder")
+    return {
+        name: _read(folder / f"{name}.py", "dependency")
+        for name in CODE_DEPS[function]
+        if (folder / f"{name}.py").is_file()
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    import hashlib
+
+    import domains
+    import sandbox
+    from contracts.checks import report_markdown, run_checks
+
+    domains.load(args.domain)  # an unknown domain is a usage error, before any work
+    source = _read(args.file, "draft")
+    deps = dependencies(args.function, args.deps)
+    standing_in = [d for d in CODE_DEPS[args.function] if d not in deps]
+    out = args.out or Path("runs") / "checks" / args.domain / (
+        f"{args.function}-{hashlib.sha256(source.encode()).hexdigest()[:12]}"
+    )
+    with sandbox.open_executor(args.sandbox) as executor:
+        report = run_checks(
+            args.domain,
+            args.function,
+            source,
+            deps=deps,
+            thorough=args.thorough,
+            executor=executor,
+            out_dir=out,
+        )
+    if args.json:
+        json.dump(report, sys.stdout, indent=1)
+        print()
+    else:
+        for c in report["checks"]:
+            mark = {"passed": "ok  ", "failed": "FAIL", "error": "ERR ", "skipped": "skip"}
+            print(f"{mark[c['status']]} {c['name']}")
+        print()
+        print(report_markdown(report))
+        if standing_in:
+            print(f"\n(ground truth stood in for: {', '.join(standing_in)})")
+        print(f"images: {out}" if any(c.get("images") for c in report["checks"]) else "")
+    return 0 if report["passed"] else 1
