@@ -27,7 +27,7 @@ from sandbox.base import VERDICTS, ExceptionInfo, Executor, Job, Report, to_json
 from sandbox.errors import BadJob, SandboxUnavailable
 from sandbox.harness import wire
 
-GRACE_S = 10.0  # [s] on top of a job's budget before the host kills the harness
+GRACE_S = 30.0  # [s] on top of a job's budget before the host kills the harness
 START_TIMEOUT_S = 120.0  # [s] for a harness to say hello
 MAX_INPUT = 256 << 20  # [bytes]
 MAX_FIELD = 16_000  # [chars] of any text field in a result header

@@ -317,8 +317,9 @@ class Server:
         for _ in range(1000):
             alive = False
             if self.in_pid1:
-                try:
-                    os.kill(-1, signal.SIGKILL)  # every process in the container but this one
+                try:  # every process in the container but this one; stopped first, so that
+                    os.kill(-1, signal.SIGSTOP)  # a fork bomb cannot outrun the killing
+                    os.kill(-1, signal.SIGKILL)
                     alive = True
                 except ProcessLookupError:
                     pass
