@@ -28,7 +28,7 @@ COLD_RUNS = 5
 WARM_JOBS = 60
 TARGET_WARM_MS = 50.0
 TARGET_COLD_S = 2.0
-CASES = {
+CASES: dict[str, tuple[str, dict[str, Any]]] = {
     "add": ("def f(x):\n    return x + 1\n", {"x": 41}),
     "numpy_4x4": (
         "import numpy as np\ndef f(T, p):\n    return {'q': T[:3, :3] @ p + T[:3, 3:]}\n",

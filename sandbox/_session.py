@@ -283,7 +283,11 @@ class HarnessExecutor(Executor):
         (staged / "src").mkdir(parents=True)
         sources = {}
         for name, source in job.sources.items():
-            (staged / "src" / f"{name}.py").write_text(source)
+            try:
+                (staged / "src" / f"{name}.py").write_bytes(source.encode())
+            except UnicodeEncodeError as e:
+                shutil.rmtree(staged, ignore_errors=True)
+                raise BadJob(f"module {name!r}: source is not valid text ({e.reason})") from None
             sources[name] = f"src/{name}.py"
         (staged / "inputs.json").write_bytes(text)
         if blob:

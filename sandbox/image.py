@@ -8,13 +8,14 @@ repository state has one tag online and offline. Wheels come from a host-side wh
 (downloaded from the URLs in uv.lock and checked against their hashes); nothing in the build
 reaches a Python package index.
 
-Usage: python -m sandbox.image {build [--base IMAGE] [--rebuild] | tag | lock [--check]}
+Usage: python -m sandbox.image {build [--base IMAGE] [--rebuild] | tag | prune | lock [--check]}
 """
 
 from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import fcntl
 import gc
 import hashlib
 import os
@@ -374,7 +375,7 @@ def build_base() -> None:
 
 def stage_context(inputs: dict[str, bytes], wheels: list[Path]) -> Path:
     """The build context under .cache/sandbox/context; wheels are hard links when possible."""
-    ctx = CACHE / "context"
+    ctx = CACHE / f"context-{os.getpid()}"
     shutil.rmtree(ctx, ignore_errors=True)
     (ctx / "wheels").mkdir(parents=True)
     for rel, data in inputs.items():
@@ -392,13 +393,28 @@ def stage_context(inputs: dict[str, bytes], wheels: list[Path]) -> Path:
 def ensure_image(*, base: str | None = None, rebuild: bool = False, quiet: bool = False) -> str:
     """Build the sandbox image unless its tag exists; returns the tag."""
     client = docker_client()
-    inputs = build_inputs()
-    digest = image_hash(inputs)
-    tag = f"{IMAGE_REPO}:{digest[:12]}"
-    if has_image(client, tag) and not rebuild:
-        if not quiet:
-            say(f"{tag} is up to date")
-        return tag
+    try:
+        inputs = build_inputs()
+        digest = image_hash(inputs)
+        tag = f"{IMAGE_REPO}:{digest[:12]}"
+        if has_image(client, tag) and not rebuild:
+            if not quiet:
+                say(f"{tag} is up to date")
+            return tag
+        CACHE.mkdir(parents=True, exist_ok=True)
+        with open(CACHE / "build.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # one build at a time (parallel test workers)
+            if has_image(client, tag) and not rebuild:
+                say(f"{tag} was built meanwhile")
+                return tag
+            return _build(client, tag, digest, inputs, base, quiet)
+    finally:
+        client.close()
+
+
+def _build(
+    client: Any, tag: str, digest: str, inputs: dict[str, bytes], base: str | None, quiet: bool
+) -> str:
     say(f"building {tag} (inputs changed or image missing)")
     t0 = time.monotonic()
     chosen = resolve_base(client, base)
@@ -430,6 +446,23 @@ def ensure_image(*, base: str | None = None, rebuild: bool = False, quiet: bool 
     return tag
 
 
+def prune_images() -> list[str]:
+    """Remove `rivet-sandbox` tags other than the current one; the tags removed."""
+    client = docker_client()
+    current = image_tag()
+    removed = []
+    for img in client.images.list(name=IMAGE_REPO):
+        for ref in img.tags:
+            if ref.startswith(f"{IMAGE_REPO}:") and ref != current:
+                try:
+                    client.images.remove(ref)
+                    removed.append(ref)
+                except Exception as e:  # in use by a running container, say
+                    say(f"kept {ref}: {str(e)[:120]}")
+    client.close()
+    return removed
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m sandbox.image", description=__doc__.splitlines()[0]
@@ -439,6 +472,7 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--base", help=f"base image (default: {ONLINE_BASE}, else {OFFLINE_BASE})")
     b.add_argument("--rebuild", action="store_true", help="build even if the tag exists")
     sub.add_parser("tag", help="print the image tag for this repository state")
+    sub.add_parser("prune", help="remove sandbox image tags other than the current one")
     lk = sub.add_parser("lock", help="regenerate sandbox/requirements.txt from uv.lock")
     lk.add_argument("--check", action="store_true", help="only check it is up to date")
     args = parser.parse_args(argv)
@@ -447,6 +481,9 @@ def main(argv: list[str] | None = None) -> int:
             print(ensure_image(base=args.base, rebuild=args.rebuild))
         elif args.cmd == "tag":
             print(image_tag())
+        elif args.cmd == "prune":
+            removed = prune_images()
+            say(f"removed {len(removed)} old tags: {', '.join(removed) or '-'}")
         else:
             text = lock_requirements()
             if args.check:

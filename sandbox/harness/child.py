@@ -34,6 +34,7 @@ _PR_SET_DUMPABLE = 4
 MAX_MESSAGE = 4000  # [chars]
 MAX_TRACEBACK = 8000  # [chars]
 MAX_JOB_FILE = 1 << 20  # [bytes] job.json
+MAX_INPUT = 256 << 20  # [bytes] inputs, as the host caps them
 _HARNESS_DIR = str(Path(__file__).resolve().parent)
 
 
@@ -112,7 +113,7 @@ def _run_job(job_dir: str, tmp_dir: str, output_limit: int) -> bytes:
     try:
         entry = _resolve_entry(spec["entry"])
         modules = _load_modules(spec["module"], sources)
-        inputs = _load_inputs(root, spec.get("inputs"), output_limit)
+        inputs = _load_inputs(root, spec.get("inputs"), MAX_INPUT)
         if entry is None:
             fn = getattr(modules[spec["module"]], spec["function"], None)
             if not callable(fn):

@@ -33,9 +33,17 @@ def run(ctx: Any) -> dict[str, Any]:
     return {"items": items}
 
 
-def _fails(fn: Callable[[], Any]) -> tuple[bool, str]:
+def _connect(host: str) -> None:
+    socket.create_connection((host, 53), timeout=1).close()
+
+
+def _open(path: str, mode: str) -> None:
+    open(path, mode).close()
+
+
+def _fails(fn: Callable[..., Any], *args: Any) -> tuple[bool, str]:
     try:
-        fn()
+        fn(*args)
     except OSError as e:
         return True, f"{type(e).__name__}: {e.strerror or e}"
     return False, "succeeded"
@@ -44,7 +52,7 @@ def _fails(fn: Callable[[], Any]) -> tuple[bool, str]:
 def _network(_: dict[str, Any]) -> tuple[bool, str]:
     results = []
     for host in ("1.1.1.1", "8.8.8.8", "172.17.0.1"):
-        ok, why = _fails(lambda h=host: socket.create_connection((h, 53), timeout=1).close())
+        ok, why = _fails(_connect, host)
         results.append((ok, f"{host}:53 {why}"))
     ifaces = sorted(os.listdir("/sys/class/net"))
     only_lo = ifaces == ["lo"]
@@ -54,23 +62,23 @@ def _network(_: dict[str, Any]) -> tuple[bool, str]:
 
 
 def _dns(_: dict[str, Any]) -> tuple[bool, str]:
-    return _fails(lambda: socket.getaddrinfo("deb.debian.org", 80))
+    return _fails(socket.getaddrinfo, "deb.debian.org", 80)
 
 
 def _root_fs(_: dict[str, Any]) -> tuple[bool, str]:
     out = []
     for path in ("/etc/rivet-probe", "/opt/rivet/lib/probe.py", "/usr/local/probe"):
-        ok, why = _fails(lambda p=path: open(p, "w").close())
+        ok, why = _fails(_open, path, "w")
         out.append((ok, f"{path}: {why}"))
     return all(ok for ok, _ in out), "; ".join(w for _, w in out)
 
 
 def _tmpfs(_: dict[str, Any]) -> tuple[bool, str]:
-    mounts = {}
+    mounts: dict[str, tuple[str, str]] = {}
     with open("/proc/mounts") as f:
         for line in f:
-            _dev, mnt, kind, opts, *_ = line.split()
-            mounts[mnt] = (kind, opts)
+            fields = line.split()
+            mounts[fields[1]] = (fields[2], fields[3])
     kind, opts = mounts.get("/tmp", ("?", ""))
     st = os.statvfs("/tmp")
     size_mb = st.f_blocks * st.f_frsize / (1 << 20)
@@ -79,7 +87,7 @@ def _tmpfs(_: dict[str, Any]) -> tuple[bool, str]:
 
 
 def _inputs_ro(_: dict[str, Any]) -> tuple[bool, str]:
-    return _fails(lambda: open("/in/probe", "w").close())
+    return _fails(_open, "/in/probe", "w")
 
 
 def _user(_: dict[str, Any]) -> tuple[bool, str]:
@@ -186,7 +194,7 @@ def _listable(path: str) -> bool:
 def _harness_memory(_: dict[str, Any]) -> tuple[bool, str]:
     out = []
     for path in ("/proc/1/environ", "/proc/1/mem", "/proc/1/fd/0", "/proc/1/fd/1"):
-        ok, why = _fails(lambda p=path: open(p, "rb").close())
+        ok, why = _fails(_open, path, "rb")
         out.append((ok, f"{path}: {why}"))
     return all(ok for ok, _ in out), "; ".join(w for _, w in out)
 

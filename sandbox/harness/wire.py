@@ -197,7 +197,7 @@ def encode_value(value: Any, *, max_bytes: int) -> tuple[bytes, bytes]:
     blob = b""
     if arrays:
         buf = io.BytesIO()
-        np.savez(buf, **arrays)
+        np.savez(buf, **arrays)  # type: ignore[arg-type]
         blob = buf.getvalue()
     return text, blob
 
