@@ -161,8 +161,39 @@ def comparable(report: Mapping[str, Any]) -> dict[str, Any]:
 # -- Markdown for the prompt --------------------------------------------------------------------
 
 
+def compact_poses(value: Any) -> Any:
+    """Poses (4×4) shown as position [m] and yaw [deg] when upright, else position and rotation
+    rows: how scene specs read in the prompt."""
+    if isinstance(value, dict):
+        return {
+            k: _pose_text(v) if k in ("pose", "target_pose") else compact_poses(v)
+            for k, v in value.items()
+        }
+    if isinstance(value, list):
+        return [compact_poses(v) for v in value]
+    return value
+
+
+def _pose_text(T: Any) -> Any:
+    try:
+        M = np.asarray(T, dtype=float)
+    except (TypeError, ValueError):
+        return T
+    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+        return T
+    xyz = [round(float(v), 4) for v in M[:3, 3]]
+    if abs(M[2, 2] - 1) < 1e-6 and np.allclose(M[3], [0, 0, 0, 1]):
+        yaw = float(np.degrees(np.arctan2(M[1, 0], M[0, 0])))
+        return {"xyz_m": xyz, "yaw_deg": round(yaw, 1)}
+    return {
+        "xyz_m": xyz,
+        "R": [[round(float(v), 3) for v in row] for row in M[:3, :3]],
+        "last_row": [round(float(v), 3) for v in M[3]],
+    }
+
+
 def _short_json(value: Any, limit: int = 1200) -> str:
-    text = json.dumps(value, separators=(", ", ": "))
+    text = json.dumps(compact_poses(value), separators=(", ", ": "))
     return _clip(text, limit)
 
 
@@ -199,7 +230,7 @@ def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
     if "counterexample" in first:
         lines += [
             "",
-            "Smallest failing input found"
+            "Smallest failing input found (poses as position and yaw about z)"
             + (f" (seed {first['seed']})" if "seed" in first else "")
             + ":",
             "```json",

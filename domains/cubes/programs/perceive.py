@@ -31,6 +31,7 @@ SAT_MIN = 0.35
 VAL_MIN = 0.10
 MIN_PIXELS = 10
 WEAK_PIXELS = 600  # a cube seen by fewer pixels is placed by physics when needed
+REFINE_PIXELS = 1500  # a cube seen by fewer pixels is placed using free space as well
 MAX_POINTS = 500  # per cube, for speed
 
 
@@ -123,6 +124,64 @@ def _fit(pts, half, eye):
     return np.array([x, y, z, (yaw + np.pi / 4) % (np.pi / 2) - np.pi / 4]), top_z
 
 
+def _face_samples(half, n=6):
+    """Points (k, 3) and outward normals (k, 3) on the top and the four sides of a cube."""
+    t = (np.arange(n) + 0.5) / n * 2 * half - half
+    a, b = np.meshgrid(t, t)
+    a, b = a.ravel(), b.ravel()
+    pts, normals = [], []
+    for axis, sign in ((2, 1.0), (0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0)):
+        p = np.zeros((len(a), 3))
+        others = [i for i in range(3) if i != axis]
+        p[:, axis] = sign * half
+        p[:, others[0]], p[:, others[1]] = a, b
+        nrm = np.zeros(3)
+        nrm[axis] = sign
+        pts.append(p)
+        normals.append(np.tile(nrm, (len(a), 1)))
+    return np.concatenate(pts), np.concatenate(normals)
+
+
+def _free_space(p, pts, half, depth, own, camera, firm):
+    """Slide a barely seen cube to where it explains its points without hiding what the camera
+    sees behind it (its visible faces must not lie in front of farther observed surfaces) and
+    without overlapping the well-seen cubes `firm` at its level."""
+    K = np.asarray(camera["K"], dtype=float)
+    T = np.asarray(camera["T_world_camera"], dtype=float)
+    R_cw, t_cw = T[:3, :3].T, -T[:3, :3].T @ T[:3, 3]
+    level = half + 2 * half * round((p[2] - half) / (2 * half))
+    samples, normals = _face_samples(half)
+    c, s = np.cos(p[3]), np.sin(p[3])
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    local_pts, world_n = samples @ Rz.T, normals @ Rz.T
+    offsets = np.arange(-0.035, 0.03501, 0.0025)
+    grid = np.array([(p[0] + dx, p[1] + dy) for dx in offsets for dy in offsets])  # (g, 2)
+    centres = np.c_[grid, np.full(len(grid), level)]  # (g, 3)
+    world = centres[:, None, :] + local_pts[None]  # (g, k, 3)
+    eye = T[:3, 3]
+    visible = np.einsum("gkj,kj->gk", eye - world, world_n) > 0
+    cam = world @ R_cw.T + t_cw
+    z = cam[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.round(K[0, 0] * cam[..., 0] / z + K[0, 2]).astype(int)
+        v = np.round(K[1, 1] * cam[..., 1] / z + K[1, 2]).astype(int)
+    h, w = depth.shape
+    inside = visible & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    uc, vc = np.clip(u, 0, w - 1), np.clip(v, 0, h - 1)
+    observed = depth[vc, uc]
+    seen_through = inside & (observed > 0) & (observed > z + 0.008) & ~own[vc, uc]
+    violation = seen_through.sum(axis=1) / np.maximum(inside.sum(axis=1), 1)
+    cost = np.empty(len(grid))
+    for g, (x, y) in enumerate(grid):
+        r = np.abs(_residuals((x, y, level, p[3]), pts, half))
+        cost[g] = np.mean(np.minimum(r, 0.005))
+    for q in firm:
+        if abs(q[2] - level) < half:
+            cost += [0.01 * _overlap(np.array([x, y, level, p[3]]), q, half) for x, y in grid]
+    best = int(np.argmin(cost + 0.004 * violation))
+    return np.array([grid[best][0], grid[best][1], level, p[3]])
+
+
 def _overlap(a, b, half):
     """Whether the footprints of two upright cubes (x, y, z, yaw) overlap by more than 3 mm."""
     for p in (a, b):
@@ -163,7 +222,7 @@ def _over(p, q, half):
     return abs(c * d[0] + s * d[1]) <= half and abs(-s * d[0] + c * d[1]) <= half
 
 
-def _repair(fits, placed, half):
+def _repair(fits, placed, half, missing):
     """Move a barely seen cube under a cube that would otherwise tip over.
 
     A cube resting off-centre on a single cube (a pyramid's upper level) needs a second
@@ -172,6 +231,7 @@ def _repair(fits, placed, half):
     """
     weak = {n for n, (_, _, pixels) in fits.items() if pixels < WEAK_PIXELS}
     weak |= set(placed) - set(fits)
+    unseen = [n for n in missing if n not in placed]
     for name in sorted(placed, key=lambda n: (placed[n][2], n)):
         p = placed[name]
         if p[2] < 2 * half:
@@ -186,7 +246,9 @@ def _repair(fits, placed, half):
         a = placed[under[0]]
         spot = np.array([2 * p[0] - a[0], 2 * p[1] - a[1], a[2], a[3]])
         options = [n for n in weak if n not in (name, under[0])]
-        if options:
+        if unseen:
+            placed[unseen.pop(0)] = spot
+        elif options:
             x = min(options, key=lambda n: (np.linalg.norm(placed[n][:2] - spot[:2]), n))
             placed[x] = spot
     return placed
@@ -200,17 +262,28 @@ def perceive(observation, meshes, camera):
     eye = np.asarray(camera["T_world_camera"], dtype=float)[:3, 3]
     labels = _labels(rgb)
     kernel = np.ones((3, 3), np.uint8)
-    fits = {}
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    fits, clouds = {}, {}
     for k, name in enumerate(HUES):
         raw = labels == k
         mask = cv2.erode(raw.astype(np.uint8), kernel).astype(bool)
-        if mask.sum() < 3 * MIN_PIXELS:  # barely visible: every pixel counts
-            mask = raw
+        if mask.sum() < 3 * MIN_PIXELS:  # barely visible: keep all but one-pixel lines, which
+            opened = cv2.morphologyEx(raw.astype(np.uint8), cv2.MORPH_OPEN, cross)
+            mask = opened.astype(bool) if opened.sum() >= MIN_PIXELS else raw  # are blends
         pts = _points(mask, depth, camera)
         if len(pts) >= MIN_PIXELS:
-            fits[name] = (*_fit(pts, half, eye), int(raw.sum()))
-    placed = _settle(fits, [n for n in HUES if n not in fits], half)
-    placed = _repair(fits, placed, half)
+            p, top = _fit(pts, half, eye)
+            fits[name] = (p, top, int(raw.sum()))
+            clouds[name] = (pts, k)
+    for name, (p, top, pixels) in list(fits.items()):
+        if pixels < REFINE_PIXELS:
+            firm = [q for n, (q, _, px) in fits.items() if n != name and px >= REFINE_PIXELS]
+            pts, k = clouds[name]
+            p = _free_space(p, pts, half, depth, labels == k, camera, firm)
+            fits[name] = (p, top, pixels)
+    missing = [n for n in HUES if n not in fits]
+    placed = _settle(fits, list(missing), half)
+    placed = _repair(fits, placed, half, missing)
     records = []
     for name in HUES:
         if name not in placed:

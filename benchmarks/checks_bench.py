@@ -1,0 +1,236 @@
+"""The checks' mutation benchmark: do the checks reject realistic bugs, and only those?
+
+For a domain's hand-written reference programs (`domains/<domain>/programs/`):
+- every correct program is checked `--repeats` times: none may be rejected, and all its
+  reports must be identical once timings are left out (no flakiness);
+- every mutant of `benchmarks/mutants/catalogue.toml` (a reference program with a planted bug)
+  is checked once: it must be rejected; the table says by which check.
+Targets (issue 6): at least 95 % of mutants rejected, zero rejections of the correct programs.
+
+Usage:
+    python -m benchmarks.checks_bench [--domain cubes] [--repeats 10] [--sandbox docker|local]
+        [--only NAME[,NAME…]] [--out DIR]
+Writes DIR/bench_checks.md (the table) and DIR/bench_checks.json; exit 0 when both targets
+are met, 1 otherwise, 2 for a broken catalogue.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+CATALOGUE = Path(__file__).resolve().parent / "mutants" / "catalogue.toml"
+CODE_DEPS = {"render": (), "perceive": ("render",), "relate": ("render",), "plan": ("relate",)}
+FUNCTIONS = ("render", "perceive", "relate", "plan")
+TARGET_CAUGHT = 0.95
+
+
+class CatalogueError(Exception):
+    """A mutant's replacement does not apply to its reference program."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Mutant:
+    name: str
+    function: str
+    bug: str
+    description: str
+    source: str
+
+
+def programs(domain: str) -> dict[str, str]:
+    folder = REPO / "domains" / domain / "programs"
+    return {f: (folder / f"{f}.py").read_text() for f in FUNCTIONS}
+
+
+def load_mutants(path: Path, references: dict[str, str]) -> list[Mutant]:
+    """The catalogue's mutants with their sources (replacements applied and verified)."""
+    data = tomllib.loads(path.read_text())
+    out, names = [], set()
+    for m in data["mutant"]:
+        if m["name"] in names:
+            raise CatalogueError(f"mutant {m['name']!r} is listed twice")
+        names.add(m["name"])
+        if m["function"] not in references:
+            raise CatalogueError(f"{m['name']}: unknown function {m['function']!r}")
+        source = references[m["function"]]
+        for k, (old, new) in enumerate(m["replace"]):
+            count = source.count(old)
+            if count != 1:
+                raise CatalogueError(
+                    f"{m['name']}: replacement {k} matches {count} times in "
+                    f"{m['function']}.py (must be exactly once): {old[:80]!r}"
+                )
+            source = source.replace(old, new)
+        if source == references[m["function"]]:
+            raise CatalogueError(f"{m['name']}: the replacements change nothing")
+        out.append(
+            Mutant(
+                name=m["name"],
+                function=m["function"],
+                bug=m["bug"],
+                description=m["description"],
+                source=source,
+            )
+        )
+    return out
+
+
+def check(domain: str, function: str, source: str, refs: dict[str, str], executor: Any, out: Path):
+    from contracts.checks import run_checks
+
+    deps = {d: refs[d] for d in CODE_DEPS[function]}
+    t0 = time.perf_counter()
+    report = run_checks(domain, function, source, deps=deps, executor=executor, out_dir=out)
+    return report, time.perf_counter() - t0
+
+
+def failing(report: dict) -> list[str]:
+    return [c["name"] for c in report["checks"] if c["status"] in ("failed", "error")]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.checks_bench", description=__doc__)
+    parser.add_argument("--domain", default="cubes")
+    parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--sandbox", choices=("docker", "local"), default="docker")
+    parser.add_argument("--only", default="", help="comma-separated mutant names (no repeats)")
+    parser.add_argument("--out", type=Path, default=REPO / "runs" / "bench-checks")
+    args = parser.parse_args(argv)
+
+    import sandbox
+    from contracts.checks import comparable
+
+    refs = programs(args.domain)
+    try:
+        mutants = load_mutants(CATALOGUE, refs)
+    except CatalogueError as e:
+        print(f"broken catalogue: {e}", file=sys.stderr)
+        return 2
+    only = {n for n in args.only.split(",") if n}
+    if only:
+        unknown = only - {m.name for m in mutants}
+        if unknown:
+            print(f"unknown mutants {sorted(unknown)}", file=sys.stderr)
+            return 2
+        mutants = [m for m in mutants if m.name in only]
+    args.out.mkdir(parents=True, exist_ok=True)
+    times: list[float] = []
+    correct_rows, mutant_rows = [], []
+    with sandbox.open_executor(args.sandbox) as ex:
+        repeats = 0 if only else args.repeats
+        for fn in FUNCTIONS if repeats else ():
+            reports = []
+            for k in range(repeats):
+                report, dt = check(args.domain, fn, refs[fn], refs, ex, args.out / "images" / fn)
+                times.append(dt)
+                reports.append(report)
+                print(
+                    f"{fn} run {k + 1}/{repeats}: {'pass' if report['passed'] else 'REJECTED'} "
+                    f"{failing(report)} ({dt:.1f} s)",
+                    flush=True,
+                )
+            identical = all(comparable(r) == comparable(reports[0]) for r in reports)
+            correct_rows.append(
+                {
+                    "function": fn,
+                    "runs": repeats,
+                    "rejections": sum(not r["passed"] for r in reports),
+                    "identical_reports": identical,
+                    "rejected_by": sorted({n for r in reports for n in failing(r)}),
+                }
+            )
+        for m in mutants:
+            report, dt = check(
+                args.domain, m.function, m.source, refs, ex, args.out / "images" / m.name
+            )
+            times.append(dt)
+            fails = failing(report)
+            mutant_rows.append(
+                {
+                    "mutant": m.name,
+                    "function": m.function,
+                    "bug": m.bug,
+                    "caught": not report["passed"],
+                    "first_failure": report["first_failure"],
+                    "failing": fails,
+                    "seconds": round(dt, 1),
+                }
+            )
+            print(
+                f"{m.name}: {'caught by ' + str(report['first_failure']) if fails else 'MISSED'} "
+                f"({dt:.1f} s)",
+                flush=True,
+            )
+    caught = sum(r["caught"] for r in mutant_rows)
+    rate = caught / len(mutant_rows) if mutant_rows else 1.0
+    false_rejections = sum(r["rejections"] for r in correct_rows)
+    summary = {
+        "domain": args.domain,
+        "mutants": len(mutant_rows),
+        "caught": caught,
+        "caught_rate": round(rate, 4),
+        "correct_runs": sum(r["runs"] for r in correct_rows),
+        "false_rejections": false_rejections,
+        "all_reports_identical": all(r["identical_reports"] for r in correct_rows),
+        "seconds_per_check_median": round(statistics.median(times), 1) if times else None,
+        "seconds_per_check_max": round(max(times), 1) if times else None,
+        "sandbox": args.sandbox,
+    }
+    (args.out / "bench_checks.json").write_text(
+        json.dumps({"summary": summary, "correct": correct_rows, "mutants": mutant_rows}, indent=1)
+    )
+    md = render_markdown(summary, correct_rows, mutant_rows)
+    (args.out / "bench_checks.md").write_text(md)
+    print()
+    print(md)
+    ok = rate >= TARGET_CAUGHT and false_rejections == 0 and summary["all_reports_identical"]
+    return 0 if ok else 1
+
+
+def render_markdown(summary: dict, correct: list[dict], mutants: list[dict]) -> str:
+    lines = [
+        f"# Checks mutation benchmark ({summary['domain']}, sandbox {summary['sandbox']})",
+        "",
+        f"- mutants rejected: **{summary['caught']}/{summary['mutants']} "
+        f"({100 * summary['caught_rate']:.1f} %)** (target ≥ {100 * TARGET_CAUGHT:.0f} %)",
+        f"- correct programs rejected: **{summary['false_rejections']} of "
+        f"{summary['correct_runs']} runs** (target 0); identical reports on repeats: "
+        f"{summary['all_reports_identical']}",
+        f"- time per full check: median {summary['seconds_per_check_median']} s, max "
+        f"{summary['seconds_per_check_max']} s",
+        "",
+    ]
+    if correct:
+        lines += [
+            "| correct program | runs | rejections | identical reports |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['function']} | {r['runs']} | {r['rejections']} | {r['identical_reports']} |"
+            for r in correct
+        ]
+        lines.append("")
+    lines += [
+        "| mutant | function | bug | caught by (first) | all failing checks |",
+        "|---|---|---|---|---|",
+    ]
+    for r in mutants:
+        first = f"`{r['first_failure']}`" if r["caught"] else "**missed**"
+        lines.append(
+            f"| {r['mutant']} | {r['function']} | {r['bug']} | {first} | "
+            f"{', '.join(r['failing'])} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
