@@ -62,7 +62,8 @@ class HarnessExecutor(Executor):
     """An executor that drives a fork-server harness over a `Channel`.
 
     Subclasses start the harness (`_open`), say where it sees the staged job files
-    (`_harness_path`), kill it (`_kill`) and explain its death (`_death`).
+    (`_harness_path`), kill it (`_kill`) and explain its death (`_death`). One job runs at a
+    time per executor; run jobs in parallel with several executors.
 
     Args:
         output_limit_mb: cap on a job's output [MiB] (JSON plus arrays).

@@ -139,10 +139,10 @@ def _run_job(job_dir: str, tmp_dir: str, output_limit: int) -> bytes:
 
 def _read(path: Path, limit: int) -> bytes:
     with open(path, "rb") as f:
-        data = f.read(limit + 1)
-    if len(data) > limit:
-        raise ValueError(f"{path.name} is over {limit} bytes")
-    return data
+        size = os.fstat(f.fileno()).st_size  # not read(limit): that allocates `limit` bytes
+        if size > limit:
+            raise ValueError(f"{path.name} is over {limit} bytes")
+        return f.read(size)
 
 
 def _resolve_entry(entry: str) -> Any:

@@ -128,7 +128,18 @@ class Server:
                 return
             kind = req.get("kind")
             if kind == "job":
-                self.send(*self.run_job(req))
+                try:
+                    self.send(*self.run_job(req))
+                except (OSError, ValueError, KeyError, TypeError) as e:  # a failure of ours
+                    detail = f"harness error: {type(e).__name__}: {e}"[:500]
+                    self.send(
+                        {
+                            "kind": "result",
+                            "id": req.get("id"),
+                            "verdict": "crashed",
+                            "detail": detail,
+                        }
+                    )
             elif kind == "warm":
                 while self.pending:
                     self._preload_next()
@@ -294,8 +305,8 @@ class Server:
         return []
 
     def _job_tmp(self) -> str:
-        path = os.path.join(self.tmp_root, f"job{self.jobs}")
-        os.mkdir(path, 0o700)
+        path = os.path.join(self.tmp_root, f"job{self.jobs}-{os.urandom(4).hex()}")
+        os.mkdir(path, 0o700)  # a fresh, unguessable name: nothing can be planted there
         return path
 
     def _wipe_tmp(self, tmp_dir: str) -> None:

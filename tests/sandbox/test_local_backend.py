@@ -123,3 +123,10 @@ def test_a_killed_harness_gives_crashed_and_a_fresh_one(local_executor):
     assert report.verdict == "crashed" and "harness died" in report.detail
     assert run(local_executor, "def f():\n    return 7\n").output == 7
     assert local_executor.restarts == before + 1
+
+
+def test_a_small_memory_limit_still_runs_small_jobs(local_executor):
+    source = "def f(n):\n    return len(bytearray(n))\n"
+    assert run(local_executor, source, inputs={"n": 8 << 20}, memory_mb=32).output == 8 << 20
+    report = run(local_executor, source, inputs={"n": 64 << 20}, memory_mb=32)
+    assert report.verdict == "oom" and 'File "draft.py", line 2' in report.exception.traceback
