@@ -6,7 +6,7 @@ registers itself on import (dm_control style); the built-in ones are imported he
 
 from __future__ import annotations
 
-from domains import cubes, tangram  # noqa: F401  (register themselves)
+from domains import assembly, cubes, tangram  # noqa: F401  (register themselves)
 from domains.base import (
     BENCHMARK_GOALS,
     BENCHMARK_STARTS,
