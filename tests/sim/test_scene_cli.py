@@ -85,7 +85,7 @@ def test_malformed_instances_are_refused(tmp_path, capsys):
     err = _refused(tmp_path, capsys, inst)
     assert "pink" in err
     inst = _hand_written("tangram")
-    inst["domain"] = "cube"
+    inst["domain"] = inst["start"]["domain"] = inst["goal"]["domain"] = "cube"
     assert "unknown domain 'cube'; known: assembly, cubes, tangram" in _refused(
         tmp_path, capsys, inst
     )
