@@ -167,11 +167,15 @@ class HarnessExecutor(Executor):
     def _diagnostics(self) -> str:
         return ""
 
+    def _check(self, job: Job) -> None:
+        """Refuse (`BadJob`) a job this executor cannot honour."""
+
     # ------------------------------------------------------------------------ jobs
 
     def run(self, job: Job) -> Report:
         if not isinstance(job, Job):
             raise BadJob(f"run() takes a sandbox.Job, not {type(job).__name__}")
+        self._check(job)
         staged = self._stage(job)
         try:
             self.start()

@@ -28,10 +28,12 @@ from pathlib import Path
 from typing import Any
 
 from sandbox._session import Channel, ChannelClosed, HarnessExecutor
-from sandbox.errors import SandboxUnavailable
+from sandbox.base import Job
+from sandbox.errors import BadJob, SandboxUnavailable
 from sandbox.image import LABEL, docker_client, has_image, image_tag
 
-_MUX = struct.Struct(">BxxxI")  # Docker's attach stream header: stream id, payload size
+_MUX = struct.Struct(">BxxxI")
+HARNESS_MB = 1024  # [MiB] kept for the warm harness (about 400 MiB resident) and the job's slack  # Docker's attach stream header: stream id, payload size
 
 
 class _AttachChannel(Channel):
@@ -88,7 +90,8 @@ class DockerExecutor(HarnessExecutor):
         image: image tag (default: the tag of the current repository state; it must exist:
             `make sandbox-image`).
         cpus: CPU limit of the container [CPUs].
-        memory_mb: memory limit of the container, harness included; swap is off [MiB].
+        memory_mb: memory limit of the container, harness included; swap is off [MiB]. A job
+            may ask for at most this minus `HARNESS_MB`.
         pids_limit: most processes and threads in the container at once.
         tmpfs_mb: size of the /tmp tmpfs [MiB].
         preload: heavy modules the harness imports up front ("default", "none" or a,b,c).
@@ -102,7 +105,7 @@ class DockerExecutor(HarnessExecutor):
         *,
         image: str | None = None,
         cpus: float = 1.0,
-        memory_mb: int = 2048,
+        memory_mb: int = 6144,
         pids_limit: int = 256,
         tmpfs_mb: int = 256,
         preload: str = "default",
@@ -182,6 +185,14 @@ class DockerExecutor(HarnessExecutor):
 
     def _harness_path(self, staged: Path) -> str:
         return f"/in/{staged.name}"
+
+    def _check(self, job: Job) -> None:
+        room = self.limits["memory_mb"] - HARNESS_MB
+        if job.memory_mb > room:
+            raise BadJob(
+                f"the job asks for {job.memory_mb} MiB but this executor's container leaves "
+                f"{room} MiB for jobs; open it with memory_mb={job.memory_mb + HARNESS_MB} or more"
+            )
 
     def close(self) -> None:
         super().close()

@@ -35,7 +35,7 @@ def run_doctor(executor: DockerExecutor | None = None) -> list[Item]:
     canary = secrets.token_hex(16)
     os.environ[CANARY_VAR] = canary  # set on the host: the probe must not see it
     own = executor is None
-    ex = executor or DockerExecutor(memory_mb=1024, pids_limit=128)
+    ex = executor or DockerExecutor(memory_mb=2048, pids_limit=128)
     try:
         return _checks(ex, canary)
     finally:

@@ -42,7 +42,8 @@ def sandbox_image() -> str:
 def docker_executor(sandbox_image: str) -> Iterator:
     from sandbox.docker_backend import DockerExecutor
 
-    with DockerExecutor(image=sandbox_image) as ex:
+    # 2 GiB for the container keeps the memory bombs small on a shared machine.
+    with DockerExecutor(image=sandbox_image, memory_mb=2048) as ex:
         ex.warm()
         yield ex
 

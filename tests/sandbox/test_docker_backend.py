@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from sandbox import Job, SandboxUnavailable
+from sandbox import BadJob, Job, SandboxUnavailable
 from sandbox.docker_backend import DockerExecutor, reap_leftovers
 from sandbox.harness.server import DEFAULT_PRELOAD
 from sandbox.image import LABEL
@@ -124,6 +124,11 @@ def test_leftover_containers_are_reaped(sandbox_image, docker_executor):
     finally:
         with contextlib.suppress(Exception):
             leftover.remove(force=True)
+
+
+def test_jobs_larger_than_the_container_are_refused(docker_executor):
+    with pytest.raises(BadJob, match="memory_mb=3072"):
+        docker_executor.run(Job(source="def f():\n    pass\n", function="f", memory_mb=2048))
 
 
 def test_missing_image_says_how_to_build_it():

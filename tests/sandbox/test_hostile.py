@@ -68,7 +68,7 @@ def test_hostile_draft(draft, docker_executor, host_guard, sandbox_image, monkey
         from sandbox.docker_backend import DockerExecutor
 
         monkeypatch.setenv("ANTHROPIC_API_KEY", FAKE_KEY)
-        with DockerExecutor(image=sandbox_image, preload="none") as fresh:
+        with DockerExecutor(image=sandbox_image, preload="none", memory_mb=2048) as fresh:
             _check(draft, fresh.run(job))
             assert_clean_next_job(fresh)
         return
