@@ -17,17 +17,30 @@ import pytest
 from sandbox import Job, SandboxUnavailable
 from sandbox.image import LABEL
 
+_ENGINE: list[str] = []  # "" when reachable, else why not; checked once per session
+
 
 def require_docker() -> None:
     """Fail (or skip with RIVET_SKIP_DOCKER=1) when the Docker engine is unreachable."""
     from sandbox.image import docker_client
 
-    try:
-        docker_client(timeout=30).close()
-    except SandboxUnavailable as e:
+    if not _ENGINE:
+        try:
+            docker_client(timeout=30).close()
+            _ENGINE.append("")
+        except SandboxUnavailable as e:
+            _ENGINE.append(str(e))
+    if _ENGINE[0]:
         if os.environ.get("RIVET_SKIP_DOCKER") == "1":
-            pytest.skip(f"RIVET_SKIP_DOCKER=1: {e}")
-        pytest.fail(f"the sandbox tests need Docker (set RIVET_SKIP_DOCKER=1 to skip): {e}")
+            pytest.skip(f"RIVET_SKIP_DOCKER=1: {_ENGINE[0]}")
+        pytest.fail(
+            f"the sandbox tests need Docker (set RIVET_SKIP_DOCKER=1 to skip): {_ENGINE[0]}"
+        )
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    if item.get_closest_marker("docker") is not None:
+        require_docker()
 
 
 @pytest.fixture(scope="session")
