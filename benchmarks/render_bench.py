@@ -48,10 +48,10 @@ def bench(name: str) -> dict:
     for cam in d.cameras:
         out[f"observation_{cam}_s"] = round(_median(lambda cam=cam: observe(d, scene, cam)), 4)
     sm = scene_model(d, scene)
-    cam = d.camera("front")
-    r = renderer_for(sm.model, cam["width"], cam["height"])
-    out["rgb_and_depth_s"] = round(_median(lambda: r.render(sm.data, cam)), 4)
-    depth = r.render(sm.data, cam)["depth"]
+    front = d.camera("front")
+    r = renderer_for(sm.model, front["width"], front["height"])
+    out["rgb_and_depth_s"] = round(_median(lambda: r.render(sm.data, front)), 4)
+    depth = r.render(sm.data, front)["depth"]
     rng = np.random.default_rng(0)
     out["depth_noise_s"] = round(_median(lambda: apply_depth_noise(depth, rng, DEFAULT_NOISE)), 4)
     out["with_mask_s"] = round(_median(lambda: observe(d, scene, "front", mask=True), 5), 4)

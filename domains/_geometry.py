@@ -123,7 +123,7 @@ def body_separation(a: Body, b: Body, *, cutoff: float = np.inf) -> tuple[float,
         for pb in b.parts:
             bound = np.linalg.norm(pa.centre - pb.centre) - pa.radius - pb.radius
             if bound > cutoff:
-                best = min(best, bound)
+                best = min(best, float(bound))
                 continue
             gap, n = separation(pa, pb)
             if gap < best - 1e-12:

@@ -158,7 +158,8 @@ def prism_with_knob(
         j = (i + 1) % n
         faces += [(ob + i, ob + j, ot + j), (ob + i, ot + j, ot + i)]
     for a, b, c_ in _ring(p, sq, c):
-        faces.append(tuple(ot + v if v < n else kb + (v - n) for v in (a, b, c_)))
+        va, vb, vc = (ot + v if v < n else kb + (v - n) for v in (a, b, c_))
+        faces.append((va, vb, vc))
     for i in range(4):
         j = (i + 1) % 4
         faces += [(kb + i, kb + j, kt + j), (kb + i, kt + j, kt + i)]

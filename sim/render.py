@@ -220,11 +220,10 @@ def observe(
     sm = scene_model(domain, scene)
     r = renderer_for(sm.model, cam["width"], cam["height"])
     ids = [o["id"] for o in scene["objects"]]
-    out = r.render(sm.data, cam, mask=mask, mask_ids=ids)
+    images = r.render(sm.data, cam, mask=mask, mask_ids=ids)
     if noise is not None:
-        out["depth"] = apply_depth_noise(out["depth"], np.random.default_rng(seed), noise)
-    out["camera"] = cam
-    return out
+        images["depth"] = apply_depth_noise(images["depth"], np.random.default_rng(seed), noise)
+    return {**images, "camera": cam}
 
 
 # -- the folder format ----------------------------------------------------------------------

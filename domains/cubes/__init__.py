@@ -130,13 +130,10 @@ class Cubes(Domain):
             if not movers:
                 break
             who = movers[int(rng.integers(len(movers)))]
-            p = pose[spot][:2, 3] + rng.uniform(-0.01, 0.01, 2)
-            rec = {
-                "id": who,
-                "mesh": "cube",
-                "pose": yaw_pose(*p, SIDE / 2, rng.uniform(-np.pi, np.pi)),
-            }
-            body = place(who, self.parts["cube"], rec["pose"])
+            x, y = pose[spot][:2, 3] + rng.uniform(-0.01, 0.01, 2)
+            at = yaw_pose(float(x), float(y), SIDE / 2, rng.uniform(-np.pi, np.pi))
+            rec = {"id": who, "mesh": "cube", "pose": at}
+            body = place(who, self.parts["cube"], at)
             placed = [place(f["id"], self.parts["cube"], f["pose"]) for f in fixed]
             if _layout.fits([body], placed, self.placement, 0.03):
                 fixed.append(rec)

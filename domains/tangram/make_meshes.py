@@ -69,7 +69,8 @@ def build() -> dict[str, tuple[trimesh.Trimesh, list[trimesh.Trimesh]]]:
 
 
 def main() -> None:
-    meshes = {}
+    meshes: dict[str, dict] = {}
+    volumes: dict[str, float] = {}
     for key, (mesh, parts) in build().items():
         _meshing.export(mesh, HERE / "meshes" / f"{key}.obj")
         files = []
@@ -88,20 +89,18 @@ def main() -> None:
                     "parallelogram": "long edge along +x, leaning toward +x",
                 }.get(key, "hypotenuse along +x, right angle toward +y")
             ),
-            "volume_m3": round(float(mesh.volume), 12),
         }
+        volumes[key] = round(float(mesh.volume), 12)
     objects = [
         {
             "id": oid,
             "mesh": key,
             "colour": COLOURS[oid],
-            "mass": round(DENSITY * meshes[key]["volume_m3"], 4),
+            "mass": round(DENSITY * volumes[key], 4),
             "friction": 0.6,
         }
         for oid, key in OBJECTS.items()
     ]
-    for m in meshes.values():
-        del m["volume_m3"]
     (HERE / "catalogue.json").write_text(
         json.dumps({"meshes": meshes, "objects": objects}, indent=1) + "\n"
     )
