@@ -78,6 +78,8 @@ class Budget:
     call_timeout: Mapping[str, float] = field(
         default_factory=lambda: {"render": 10.0, "perceive": 10.0, "relate": 5.0, "plan": 10.0}
     )
+    hard_observations: int = 1  # plus the most occluded views of `hard_seeds`' instances
+    hard_seeds: tuple[int, ...] = tuple(range(1, 41))
     shrink_calls: int = 20
     job_timeout: float = 240.0
 
@@ -107,6 +109,7 @@ THOROUGH = Budget(
         )
     ),
     examples={"plan": 60, "order": 50, "translation": 50, "determinism": 4, "identity": 8},
+    hard_observations=3,
     shrink_calls=60,
     job_timeout=600.0,
 )
@@ -268,7 +271,13 @@ def build_inputs(
         cases["scenes"] = scenes
     elif function == "perceive":
         obs = []
-        for i, side, cam in budget.observations:
+        chosen = [(i % len(pool), side, cam) for i, side, cam in budget.observations]
+        search = instances(domain, budget.hard_seeds)
+        for i, side, cam in hardest_views(domain, search, budget.hard_observations, exclude=[]):
+            if (search[i].seed, side, cam) not in {(pool[j].seed, s_, c) for j, s_, c in chosen}:
+                pool = [*pool, search[i]]
+                chosen.append((len(pool) - 1, side, cam))
+        for i, side, cam in chosen:
             i = i % len(pool)
             recs = scene_of(i, side)
             name = f"{pool[i].name}/{side}/{cam}"
@@ -293,6 +302,31 @@ def build_inputs(
         raise UsageError(f"unknown function '{function}'; known: {', '.join(FUNCTIONS)}")
     inputs = {"spec": domain_spec(domain), "cases": cases, "budget": budget.to_inputs()}
     return inputs, host
+
+
+def hardest_views(
+    domain: Domain, pool: list, n: int, *, exclude: list[tuple[int, str, str]]
+) -> list[tuple[int, str, str]]:
+    """The `n` (instance, side, camera) views whose least visible object shows the fewest
+    pixels (an object hidden behind or under others first): the views perception finds
+    hardest, so that the checks see occlusion whenever the generator produces it."""
+    if n <= 0:
+        return []
+    from toolbox import render_scene
+
+    meshes = domain.meshes()
+    scored = []
+    for i, inst in enumerate(pool):
+        for side in ("start", "goal"):
+            recs = _records(inst.start if side == "start" else inst.goal)
+            for cam in domain.cameras:
+                if (i, side, cam) in exclude:
+                    continue
+                mask = render_scene(recs, meshes, camera(domain, cam, HALF_RES))["mask"]
+                areas = np.bincount(mask[mask >= 0].ravel(), minlength=len(recs))
+                scored.append((int(areas.min()), i, side, cam))
+    scored.sort(key=lambda t: (t[0], t[1], t[2], t[3]))
+    return [(i, side, cam) for _, i, side, cam in scored[:n]]
 
 
 def infeasible_cases(domain: Domain, inst: domains.Instance) -> list[dict[str, Any]]:

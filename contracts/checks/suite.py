@@ -123,6 +123,11 @@ class SuiteContext:
     def call(self, *args: Any, fn: Callable | None = None, label: str = "") -> CallResult:
         """Call the draft (or `fn`) on copies of `args` within the per-call time budget."""
         timeout = float(self.budget["call_timeout"][self.function])
+        if self.timeouts and fn is None:
+            # once the draft overran, later calls fail at once: a draft that never returns
+            # must not hold the whole job for calls x budget seconds
+            self.timeouts.append(label)
+            return CallResult(timed_out=True, seconds=timeout)
         result = call(fn or self.fn, *args, timeout=timeout, files=self.files)
         if result.timed_out:
             self.timeouts.append(label)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import traceback
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -115,6 +116,13 @@ def run_check(
         body(r)
     except Failure as f:
         apply_failure(r, f)
+    except Exception as e:  # the output is too malformed for this check to read
+        r.status = "error"
+        r.message = (
+            f"this check could not evaluate the function's output ({type(e).__name__}: {e}); "
+            "fix the failing schema check first"
+        )
+        r.traceback = traceback.format_exc()
     r.duration_s = time.perf_counter() - t0
     return r
 

@@ -97,7 +97,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
             raise Failure(message=f"RELATIONS maps str to str; bad entries: {bad!r}")
         for i, sc in enumerate(scenes):
             res = base(i)
-            if not res.ok:
+            if not res.ok or _schema_problem(res.value, sc["records"]):
                 continue
             types = sorted({t for (_, _, t) in edge_multiset(res.value)} - set(rel))
             if types:

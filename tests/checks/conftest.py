@@ -1,0 +1,60 @@
+"""Shared pieces for the checks tests: the reference programs and a local sandbox executor."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+PROGRAMS = REPO / "domains" / "cubes" / "programs"
+CODE_DEPS = {"render": (), "perceive": ("render",), "relate": ("render",), "plan": ("relate",)}
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+def program(name: str) -> str:
+    return (PROGRAMS / f"{name}.py").read_text()
+
+
+def deps_of(function: str) -> dict[str, str]:
+    return {d: program(d) for d in CODE_DEPS[function]}
+
+
+@pytest.fixture(scope="session")
+def executor():
+    """The local harness (isolates nothing: these drafts are ours)."""
+    from sandbox.local_backend import LocalExecutor
+
+    with LocalExecutor(quiet=True) as ex:
+        yield ex
+
+
+@pytest.fixture(scope="session")
+def check(executor, tmp_path_factory):
+    """check(function, source, deps=None) -> report, through the local sandbox."""
+    from contracts.checks import run_checks
+
+    out = tmp_path_factory.mktemp("check-images")
+
+    def run(function: str, source: str, deps: dict | None = None) -> dict:
+        return run_checks(
+            "cubes",
+            function,
+            source,
+            deps=deps_of(function) if deps is None else deps,
+            executor=executor,
+            out_dir=out,
+        )
+
+    return run
+
+
+def failing(report: dict) -> list[str]:
+    return [c["name"] for c in report["checks"] if c["status"] in ("failed", "error")]
+
+
+def by_name(report: dict, name: str) -> dict:
+    return next(c for c in report["checks"] if c["name"] == name)

@@ -1,0 +1,186 @@
+"""Each check category fails for the right reason, the references pass, reports repeat exactly.
+
+Drafts run through the local sandbox backend (the harness without isolation: the drafts here
+are ours), with the same entry point and inputs as under Docker.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from contracts import validate
+from contracts.checks import comparable, report_markdown
+
+from .conftest import by_name, failing, program
+
+
+@pytest.mark.parametrize("function", ["relate", "plan"])
+def test_reference_programs_pass(check, function):
+    report = check(function, program(function))
+    validate("check_report", report)
+    assert report["passed"], report_markdown(report)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("function", ["render", "perceive"])
+def test_reference_programs_with_images_pass(check, function):
+    report = check(function, program(function))
+    assert report["passed"], report_markdown(report)
+    image = next(c for c in report["checks"] if c["category"] == "image")
+    assert image["images"] and image["metrics"]["iou_mean"] > 0.9
+
+
+def test_same_draft_gives_the_same_report(check):
+    a = check("relate", program("relate"))
+    b = check("relate", program("relate"))
+    assert comparable(a) == comparable(b)
+    bad = program("relate").replace("upper, lower = (a, b) if", "upper, lower = (b, a) if")
+    assert comparable(check("relate", bad)) == comparable(check("relate", bad))
+
+
+# -- interface --------------------------------------------------------------------------------
+
+
+def test_interface_missing_function(check):
+    report = check(
+        "relate", "RELATIONS = {'on': 'x'}\n\ndef relations(records, meshes):\n    return {}\n"
+    )
+    assert report["first_failure"] == "interface.signature"
+    assert "defines no function `relate`" in by_name(report, "interface.signature")["message"]
+    assert len(report["checks"]) == 1  # nothing else can run
+
+
+def test_interface_wrong_signature(check):
+    source = program("relate").replace("def relate(records, meshes):", "def relate(records):")
+    report = check("relate", source)
+    assert report["first_failure"] == "interface.signature"
+    assert by_name(report, "interface.signature")["actual"] == "def relate(records)"
+
+
+def test_interface_import_error(check):
+    report = check(
+        "plan", "import numpy as np\n\ndef plan(start_state, goal_state)\n    return 1\n"
+    )
+    assert report["first_failure"] == "interface.import"
+    assert "SyntaxError" in by_name(report, "interface.import")["message"]
+
+
+def test_interface_too_slow(check):
+    source = "def plan(start_state, goal_state):\n    while True:\n        pass\n"
+    report = check("plan", source)
+    assert report["first_failure"] == "interface.returns_in_time"
+    assert "did not return within 10 s" in by_name(report, "interface.returns_in_time")["message"]
+    assert by_name(report, "schema.output")["status"] == "error"
+
+
+# -- schema -----------------------------------------------------------------------------------
+
+
+def test_schema_wrong_output(check):
+    source = program("relate").replace(
+        'return nx.node_link_data(g, edges="edges")', "return list(g.edges(data=True))"
+    )
+    report = check("relate", source)
+    assert report["first_failure"] == "schema.output"
+    c = by_name(report, "schema.output")
+    assert "is not a relation graph" in c["message"] and c["counterexample"]["domain"] == "cubes"
+
+
+# -- properties -------------------------------------------------------------------------------
+
+
+def test_property_plan_without_temporary_places(check):
+    from .conftest import PROGRAMS
+
+    report = check("plan", (PROGRAMS / "drafts" / "plan_v1.py").read_text())
+    assert report["first_failure"] == "property.reaches_goal"
+    c = by_name(report, "property.reaches_goal")
+    assert any(w in c["message"] for w in ("interpenetrate", "rest(s) on it", "rests on nothing"))
+    assert set(c["counterexample"]) == {"start", "goal"}
+    assert c["seed"] == 20250601
+
+
+def test_property_relate_depends_on_record_order(check):
+    source = program("relate").replace("    order = sorted(ids)\n", "    order = list(ids)\n")
+    source = source.replace(
+        '                g.add_edge(a, b, type="adjacent")\n                g.add_edge(b, a, type="adjacent")',
+        '                g.add_edge(a, b, type="adjacent")',
+    )
+    report = check("relate", source)
+    assert "property.record_order_invariant" in failing(report)
+    c = by_name(report, "property.record_order_invariant")
+    assert "order" in c["counterexample"] and c["examples"] >= 1
+
+
+def test_property_plan_raises_on_infeasible_goal(check):
+    source = program("plan").replace(
+        '    if goal is None:\n        return {"status": "infeasible", "reason": why}',
+        "    if goal is None:\n        raise ValueError(why)",
+    )
+    report = check("plan", source)
+    assert failing(report) == ["property.infeasible_explicit"]
+    c = by_name(report, "property.infeasible_explicit")
+    assert c["status"] == "error" and "ValueError" in c["traceback"]
+    assert "why_no_plan_exists" in c["counterexample"]
+
+
+def test_property_nondeterministic_plan(check):
+    source = program("plan").replace(
+        "        move = None\n        for i in ready:",
+        "        import random\n\n        random.shuffle(ready)\n        move = None\n        for i in ready:",
+    )
+    assert "property.deterministic" in failing(check("plan", source))
+
+
+# -- domain -----------------------------------------------------------------------------------
+
+
+def test_domain_support_reversed(check):
+    source = program("relate").replace(
+        "upper, lower = (a, b) if axis[2] > 0 else (b, a)",
+        "upper, lower = (b, a) if axis[2] > 0 else (a, b)",
+    )
+    report = check("relate", source)
+    assert report["first_failure"] == "domain.cubes.support_matches_geometry"
+    assert "wrong way" in by_name(report, "domain.cubes.support_matches_geometry")["message"]
+
+
+def test_domain_temporary_places_touching(check):
+    from benchmarks.checks_bench import CATALOGUE, load_mutants, programs
+
+    mutant = next(
+        m for m in load_mutants(CATALOGUE, programs("cubes")) if m.name == "plan_temporary_touching"
+    )
+    report = check("plan", mutant.source)
+    assert "domain.cubes.temporary_places_clear" in failing(report)
+
+
+# -- images -----------------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_image_render_opengl_convention(check):
+    source = program("render").replace(
+        "    out = render_scene(",
+        '    camera = dict(camera, T_world_camera=np.asarray(camera["T_world_camera"]) '
+        "@ np.diag([1.0, -1.0, -1.0, 1.0]))\n    out = render_scene(",
+    )
+    report = check("render", source)
+    assert report["first_failure"] == "image.render_vs_simulator"
+    c = by_name(report, "image.render_vs_simulator")
+    assert "silhouette IoU" in c["message"] and c["images"]
+    assert c["metrics"]["iou_mean"] < 0.2
+
+
+@pytest.mark.slow
+def test_image_and_accuracy_perceive_ids_swapped(check):
+    source = program("perceive").replace(
+        '    "red": 0.0,\n    "green": 127.0,', '    "red": 127.0,\n    "green": 0.0,'
+    )
+    report = check("perceive", source)
+    fails = failing(report)
+    assert "property.accuracy" in fails and "image.perceive_rerender" in fails
+    assert (
+        "'red'" in by_name(report, "property.accuracy")["message"]
+        or "'green'" in by_name(report, "property.accuracy")["message"]
+    )
