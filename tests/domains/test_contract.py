@@ -7,6 +7,7 @@ benchmark of 60 physically valid instances whose construction orders are executa
 
 from __future__ import annotations
 
+import importlib
 import json
 
 import numpy as np
@@ -54,6 +55,16 @@ def test_meshes_are_watertight_and_equal_their_convex_parts(domain):
         assert all(p.is_convex for p in parts), key
         assert abs(sum(p.volume for p in parts) - mesh.volume) < 1e-3 * mesh.volume, key
         assert spec.frame, key
+
+
+def test_mesh_files_match_their_script(domain):
+    built = importlib.import_module(f"domains.{domain.name}.make_meshes").build()
+    assert set(built) == set(domain.mesh_specs)
+    for key, value in built.items():
+        mesh, parts = value if isinstance(value, tuple) else (value, [value])
+        assert np.allclose(mesh.vertices, domain.mesh(key).vertices, atol=1e-8), key
+        assert np.array_equal(mesh.faces, domain.mesh(key).faces), key
+        assert len(parts) == len(domain.collision_meshes[key]), key
 
 
 def test_meshes_are_graspable_top_down(domain):
