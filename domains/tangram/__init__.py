@@ -13,6 +13,7 @@ from domains import _layout
 from domains._geometry import place, yaw_pose
 from domains._planning import Region
 from domains.base import Domain
+from domains.errors import GenerationError
 from domains.registry import register
 from domains.tangram.figures import OBJECTS, UNIT
 
@@ -68,7 +69,7 @@ class Tangram(Domain):
                 for r in recs
             ):
                 return recs
-        raise RuntimeError(f"figure {name!r} does not fit the workspace")
+        raise GenerationError(f"figure {name!r} does not fit the workspace")
 
     def make_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
         ids = [str(i) for i in rng.permutation(list(OBJECTS))]
