@@ -1,0 +1,179 @@
+"""`rivet eval DOMAIN`: run trials — observe start and goal, plan with a policy, execute on the
+simulated FR3 + 2F-85, score — and print the metrics, timings and every failure.
+
+Policies: `oracle` (ground truth + the generator's construction order: the executor alone),
+`programs DIR` (render/perceive/relate/plan .py files in DIR), `artifacts` (the frozen,
+hash-checked programs of artifacts/DOMAIN). Trials come from the fixed benchmark set
+(20 goals × 3 starts) unless `--seed` or `--instances` says otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from contracts.errors import UsageError
+
+VIEWS = ("front", "view1", "view2")
+
+
+def _policy(values: list[str]) -> tuple[str, str | None]:
+    if values == ["oracle"] or values == ["artifacts"]:
+        return values[0], None
+    if len(values) == 2 and values[0] in ("programs", "artifacts"):
+        return values[0], values[1]
+    raise UsageError(
+        f"--policy must be 'oracle', 'programs DIR' or 'artifacts'; got {' '.join(values)!r}"
+    )
+
+
+def _instances(domain, args: argparse.Namespace) -> list[dict]:
+    if args.instances:
+        from sim.scene import load_instance
+
+        files = (
+            sorted(Path(args.instances).glob("*.json"))
+            if Path(args.instances).is_dir()
+            else [Path(args.instances)]
+        )
+        if not files:
+            raise UsageError(f"--instances {args.instances}: no .json instance files")
+        out = []
+        for f in files:
+            _, inst = load_instance(f)
+            d = inst.to_dict()
+            d["name"] = d.get("name") or f.stem
+            out.append(d)
+        return out[: args.trials] if args.trials else out
+    if args.seed is not None:
+        n = args.trials or 60
+        return [domain.generate(args.seed + k).to_dict() for k in range(n)]
+    bench = domain.benchmark()
+    # start-major order, so that a short run still covers many goals
+    ordered = sorted(bench, key=lambda i: (i.name.split("_start")[-1], i.name))
+    return [i.to_dict() for i in ordered[: args.trials or len(ordered)]]
+
+
+def _eval_one(domain_name: str, args: argparse.Namespace, view: str) -> dict:
+    import domains
+    from sim.evaluation import EvalConfig, progress_bar, run_eval, table
+
+    domain = domains.load(domain_name)
+    policy = _policy(args.policy)
+    if policy[0] == "artifacts":
+        from artifacts import verify
+
+        verify(
+            domain_name, Path(policy[1]) if policy[1] else None
+        )  # fail fast, exit 1 naming the file
+    instances = _instances(domain, args)
+    config = EvalConfig(
+        domain=domain_name,
+        policy=policy,
+        view=view,
+        weld_assist=args.weld_assist,
+        record_root=str(Path(args.record) / domain_name / view) if args.record else None,
+    )
+    summary = run_eval(
+        config,
+        instances,
+        workers=args.workers,
+        progress=None if args.quiet else progress_bar(len(instances), f"{domain_name}/{view}"),
+    )
+    print(table(summary))
+    return summary
+
+
+def run(args: argparse.Namespace) -> int:
+    import domains
+    from sim.evaluation import PAPER, write_json
+
+    names = domains.names() if args.all else [domains.load(args.domain).name]
+    if not args.all and args.domain is None:
+        raise UsageError("name a DOMAIN or pass --all")
+    views = VIEWS if args.all else [args.view]
+    results: dict[str, dict[str, dict]] = {}
+    for name in names:
+        for view in views:
+            results.setdefault(name, {})[view] = _eval_one(name, args, view)
+    if args.json:
+        out = results[names[0]][views[0]] if len(names) == 1 and len(views) == 1 else results
+        write_json(out, Path(args.json))
+    if (
+        _policy(args.policy)[0] == "artifacts"
+        and not args.seed
+        and not args.instances
+        and not args.trials
+    ):
+        for name in names:
+            if "front" in results[name]:
+                front = results[name]["front"]
+                front["views"] = {v: results[name][v]["final_sr"] for v in results[name]}
+                write_json(front, Path("artifacts") / name / "eval.json")
+    if args.all:
+        print("\nTable I (front camera) — ours vs paper")
+        print(f"  {'domain':<10} {'state_ac':>16} {'plan_sr':>16} {'final_sr':>16}")
+        for name in names:
+            r, p = results[name]["front"], PAPER.get(name, {})
+            cells = [
+                f"{100 * r[k]:5.1f}% / {100 * p.get(k, float('nan')):5.1f}%"
+                for k in ("state_ac", "plan_sr", "final_sr")
+            ]
+            print(f"  {name:<10} " + " ".join(f"{c:>16}" for c in cells))
+        print("\nTable III (final success by viewpoint) — ours vs paper")
+        print(f"  {'domain':<10} {'view1':>16} {'view2':>16}")
+        for name in names:
+            p = PAPER.get(name, {})
+            cells = [
+                f"{100 * results[name][v]['final_sr']:5.1f}% / {100 * p.get(v, float('nan')):5.1f}%"
+                for v in ("view1", "view2")
+            ]
+            print(f"  {name:<10} " + " ".join(f"{c:>16}" for c in cells))
+    all_ok = all(r["final_sr"] == 1.0 for per in results.values() for r in per.values())
+    return 0 if all_ok else 1
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "eval", help="run start/goal trials in the simulator and score them", description=__doc__
+    )
+    p.add_argument("domain", nargs="?", metavar="DOMAIN")
+    p.add_argument(
+        "--all", action="store_true", help="every domain, every view; prints Tables I and III"
+    )
+    p.add_argument(
+        "--policy",
+        nargs="+",
+        default=["artifacts"],
+        metavar="POLICY",
+        help="oracle | programs DIR | artifacts (default)",
+    )
+    p.add_argument("--trials", type=int, default=None, metavar="N", help="run the first N trials")
+    p.add_argument("--view", choices=VIEWS, default="front", help="observation camera")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="a fresh generated set from seed S instead of the benchmark",
+    )
+    p.add_argument(
+        "--instances",
+        default=None,
+        metavar="DIR",
+        help="instance files to run instead of the benchmark",
+    )
+    p.add_argument("--workers", type=int, default=1, metavar="N", help="trials in N processes")
+    p.add_argument("--json", default=None, metavar="OUT", help="write the results JSON here")
+    p.add_argument(
+        "--record",
+        default=None,
+        metavar="DIR",
+        help="write an MP4 + start/goal/final PNGs per trial",
+    )
+    p.add_argument(
+        "--weld-assist",
+        action="store_true",
+        help="contact-gated weld assist (see docs/executor.md)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=run)

@@ -1,0 +1,258 @@
+"""Many trials: the benchmark protocol (20 goals × 3 starts), metrics, attribution, tables.
+
+Trials run in worker processes (`workers`); each worker builds its own domain and policy, so
+nothing crosses process boundaries but instance names and JSON results.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import sys
+from collections import Counter
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+PolicySpec = tuple[str, str | None]  # ("oracle" | "programs" | "artifacts", folder or None)
+
+# The paper's figures (Table I: front camera; Table III: final success on two more viewpoints).
+PAPER = {
+    "cubes": {"state_ac": 1.0, "plan_sr": 1.0, "final_sr": 1.0, "view1": 0.933, "view2": 1.0},
+    "tangram": {"state_ac": 0.90, "plan_sr": 0.90, "final_sr": 0.90, "view1": 1.0, "view2": 0.867},
+    "assembly": {
+        "state_ac": 0.933,
+        "plan_sr": 0.867,
+        "final_sr": 0.867,
+        "view1": 0.80,
+        "view2": 0.767,
+    },
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvalConfig:
+    domain: str
+    policy: PolicySpec
+    view: str = "front"
+    weld_assist: bool = False
+    record_root: str | None = None
+
+
+def make_policy(domain_name: str, spec: PolicySpec):
+    from sim.trials import OraclePolicy, ProgramPolicy
+
+    kind, folder = spec
+    if kind == "oracle":
+        return OraclePolicy()
+    import domains
+    from artifacts import System, load, load_modules
+
+    domain = domains.load(domain_name)
+    if kind == "artifacts":
+        return ProgramPolicy(load(domain_name, Path(folder) if folder else None), "artifacts")
+    assert folder is not None
+    sources = {}
+    for name in ("render", "perceive", "relate", "plan"):
+        path = Path(folder) / f"{name}.py"
+        if not path.is_file():
+            from contracts.errors import UsageError
+
+            raise UsageError(f"--policy programs {folder}: {path} is missing")
+        sources[name] = path.read_text()
+    system = System(
+        domain=domain_name,
+        manifest={},
+        modules=load_modules(sources, origin=str(folder)),
+        meshes=domain.meshes(),
+    )
+    return ProgramPolicy(system, f"programs {folder}")
+
+
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(config: EvalConfig) -> None:
+    import domains
+
+    _WORKER["domain"] = domains.load(config.domain)
+    _WORKER["policy"] = make_policy(config.domain, config.policy)
+    _WORKER["config"] = config
+
+
+def _run_one(instance_json: dict) -> dict:
+    from domains.base import Instance
+    from sim.trials import run_trial
+
+    cfg: EvalConfig = _WORKER["config"]
+    instance = Instance.from_dict(instance_json)
+    record = Path(cfg.record_root) / instance.name if cfg.record_root else None
+    try:
+        result = run_trial(
+            _WORKER["domain"],
+            instance,
+            _WORKER["policy"],
+            view=cfg.view,
+            weld_assist=cfg.weld_assist,
+            record_dir=record,
+        ).to_dict()
+    except Exception as e:  # a broken trial must not stop the run
+        import traceback
+
+        result = {
+            "name": instance.name,
+            "state_ok": False,
+            "plan_ok": False,
+            "final_ok": False,
+            "failure": {
+                "stage": "harness",
+                "reason": f"{type(e).__name__}: {e}",
+                "traceback": traceback.format_exc(limit=-4),
+            },
+            "timings": {},
+            "steps": [],
+            "object_errors": [],
+        }
+    return result
+
+
+def run_eval(
+    config: EvalConfig,
+    instances: Sequence[dict],
+    *,
+    workers: int = 1,
+    progress: Callable[[dict], None] | None = None,
+) -> dict:
+    """Run every instance (JSON dicts) and summarise; results keep the instances' order."""
+    results: dict[int, dict] = {}
+    if workers <= 1:
+        _init_worker(config)
+        for i, inst in enumerate(instances):
+            results[i] = _run_one(inst)
+            if progress:
+                progress(results[i])
+    else:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")  # a fresh GL context per worker; no forked EGL state
+        with ProcessPoolExecutor(
+            workers, mp_context=ctx, initializer=_init_worker, initargs=(config,)
+        ) as pool:
+            futures = {pool.submit(_run_one, inst): i for i, inst in enumerate(instances)}
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+                if progress:
+                    progress(results[futures[fut]])
+    per_trial = [results[i] for i in range(len(instances))]
+    return summarise(config, per_trial)
+
+
+def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
+    n = len(per_trial)
+    rate = lambda key: (sum(t[key] for t in per_trial) / n) if n else 0.0  # noqa: E731
+    pos = [
+        s["position_error"]
+        for t in per_trial
+        for s in t["steps"]
+        if s.get("position_error") is not None
+    ]
+    yaw = [s["yaw_error"] for t in per_trial for s in t["steps"] if s.get("yaw_error") is not None]
+    latency = [t["timings"]["policy"] for t in per_trial if "policy" in t["timings"]]
+    wall = [t["timings"]["total"] for t in per_trial if "total" in t["timings"]]
+    sim_t = sum(t["timings"].get("execute_sim", 0.0) for t in per_trial)
+    exec_wall = sum(t["timings"].get("execute_wall", 0.0) for t in per_trial)
+    return {
+        "domain": config.domain,
+        "trials": n,
+        "state_ac": rate("state_ok"),
+        "plan_sr": rate("plan_ok"),
+        "final_sr": rate("final_ok"),
+        "view": config.view,
+        "policy": " ".join(p for p in config.policy if p),
+        "weld_assist": config.weld_assist,
+        "failures": dict(Counter(t["failure"]["stage"] for t in per_trial if t["failure"])),
+        "timing": {
+            "median_policy_latency_s": statistics.median(latency) if latency else None,
+            "median_trial_wall_s": statistics.median(wall) if wall else None,
+            "realtime_factor": sim_t / exec_wall if exec_wall > 0 else None,
+        },
+        "precision": {
+            "median_position_error_mm": 1000 * float(np.median(pos)) if pos else None,
+            "median_yaw_error_deg": float(np.degrees(np.median(yaw))) if yaw else None,
+            "placements": len(pos),
+        },
+        "per_trial": per_trial,
+    }
+
+
+def table(summary: dict) -> str:
+    """The terminal table: metrics, paper figures where known, and every failure."""
+    d = summary["domain"]
+    paper = PAPER.get(d, {})
+    pct = lambda v: "   –  " if v is None else f"{100 * v:5.1f}%"  # noqa: E731
+    lines = [
+        f"{d} · policy {summary['policy']} · view {summary['view']} · {summary['trials']} trials",
+        f"  {'metric':<10} {'ours':>7} {'paper':>7}",
+    ]
+    for key in ("state_ac", "plan_sr", "final_sr"):
+        ref = (
+            paper.get(key)
+            if summary["view"] == "front"
+            else paper.get(summary["view"])
+            if key == "final_sr"
+            else None
+        )
+        lines.append(f"  {key:<10} {pct(summary[key]):>7} {pct(ref):>7}")
+    t, p = summary["timing"], summary["precision"]
+    if t["median_policy_latency_s"] is not None:
+        lines.append(f"  median policy latency {t['median_policy_latency_s'] * 1000:.0f} ms")
+    if t["median_trial_wall_s"] is not None:
+        lines.append(
+            f"  median trial wall time {t['median_trial_wall_s']:.1f} s"
+            + (
+                f", simulation {t['realtime_factor']:.1f}× real time"
+                if t["realtime_factor"]
+                else ""
+            )
+        )
+    if p["median_position_error_mm"] is not None:
+        lines.append(
+            f"  placement: median position error {p['median_position_error_mm']:.2f} mm, "
+            f"median yaw error {p['median_yaw_error_deg']:.2f}° over {p['placements']} placements"
+        )
+    failed = [tr for tr in summary["per_trial"] if tr["failure"]]
+    if failed:
+        lines.append(f"  failures ({len(failed)}):")
+        for tr in failed:
+            lines.append(f"    {tr['name']}: [{tr['failure']['stage']}] {tr['failure']['reason']}")
+    return "\n".join(lines)
+
+
+def write_json(summary: dict, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(summary, indent=1) + "\n")
+
+
+def default_workers() -> int:
+    return max(1, min(4, (os.cpu_count() or 1)))
+
+
+def progress_bar(total: int, desc: str):
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit="trial", file=sys.stderr, dynamic_ncols=True)
+    counts = Counter()
+
+    def update(result: dict) -> None:
+        counts["final"] += bool(result["final_ok"])
+        bar.update(1)
+        bar.set_postfix_str(f"final {counts['final']}/{bar.n}")
+        if bar.n == total:
+            bar.close()
+
+    return update

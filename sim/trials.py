@@ -1,0 +1,321 @@
+"""One trial: observe start and goal → policy → plan → execute in physics → score.
+
+Design rule: a trial never raises for the work failing; it returns a `TrialResult` whose
+`failure` names the first stage that went wrong (perception, relations, planning, execution),
+so the harness always goes on with the next trial. Only a broken harness raises.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+import zlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Protocol
+
+import mujoco
+import numpy as np
+
+from contracts import ContractError, to_jsonable, validate
+from domains import Domain
+from domains.base import Instance
+from sim import robot
+from sim.executor import Executor, ExecutorConfig
+from sim.render import observe, renderer_for
+from sim.scene import body_name, build_spec
+from sim.score import final_success, state_accuracy
+from sim.settle import check_order
+
+Stage = Literal["perception", "relations", "planning", "execution", "harness"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class PolicyOutput:
+    """What a policy made of a start/goal pair."""
+
+    plan: Any
+    start_state: dict | None  # {"objects", "relations"} as perceived; None for the oracle
+    goal_state: dict | None
+    timings: dict[str, float] = field(default_factory=dict)  # [s]
+
+
+class Policy(Protocol):
+    name: str
+
+    def solve(
+        self, domain: Domain, instance: Instance, start_obs: dict, goal_obs: dict
+    ) -> PolicyOutput: ...
+
+
+class OraclePolicy:
+    """Ground truth and the generator's construction order: measures the executor alone."""
+
+    name = "oracle"
+
+    def solve(self, domain, instance, start_obs, goal_obs) -> PolicyOutput:
+        steps = [{"object": s["object"], "target_pose": s["target_pose"]} for s in instance.order]
+        return PolicyOutput(
+            plan={"status": "ok", "steps": steps}, start_state=None, goal_state=None
+        )
+
+
+class ProgramPolicy:
+    """Runs loaded programs (a `artifacts.System`) in-process."""
+
+    def __init__(self, system, name: str) -> None:
+        self.system = system
+        self.name = name
+
+    def solve(self, domain, instance, start_obs, goal_obs) -> PolicyOutput:
+        plan = self.system.solve(start_obs, goal_obs)
+        start, goal = self.system.last_states
+        return PolicyOutput(
+            plan=plan, start_state=start, goal_state=goal, timings=dict(self.system.timings)
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrialResult:
+    name: str
+    state_ok: bool
+    plan_ok: bool
+    final_ok: bool
+    failure: dict | None  # {"stage", "reason"}
+    timings: dict[str, float]
+    steps: list[dict]
+    object_errors: list[dict]
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "state_ok": self.state_ok,
+            "plan_ok": self.plan_ok,
+            "final_ok": self.final_ok,
+            "failure": self.failure,
+            "timings": {k: round(v, 4) for k, v in self.timings.items()},
+            "steps": self.steps,
+            "object_errors": self.object_errors,
+        }
+
+
+def _seed(name: str, side: str) -> int:
+    return zlib.crc32(f"{name}/{side}".encode())
+
+
+def _state_reason(score, side: str) -> tuple[Stage, str]:
+    if score.missing or score.extra:
+        return "perception", f"{side}: missing {score.missing}, extra {score.extra}"
+    bad = [e for e in score.objects if not e.within]
+    if bad:
+        e = bad[0]
+        return "perception", f"{side}: {e.id} off by {1000 * e.translation:.1f} mm" + (
+            "" if e.rotation is None else f", {np.degrees(e.rotation):.1f}°"
+        )
+    return (
+        "relations",
+        f"{side}: relations differ (missing {score.missing_edges[:3]}, extra {score.extra_edges[:3]})",
+    )
+
+
+def run_trial(
+    domain: Domain,
+    instance: Instance,
+    policy: Policy,
+    *,
+    view: str = "front",
+    weld_assist: bool = False,
+    record_dir: Path | None = None,
+    config: ExecutorConfig | None = None,
+) -> TrialResult:
+    """Run one trial end to end; see the module docstring."""
+    timings: dict[str, float] = {}
+    failure: tuple[Stage, str] | None = None
+    t0 = time.perf_counter()
+    start_obs = observe(domain, instance.start, view, seed=_seed(instance.name, "start"))
+    goal_obs = observe(domain, instance.goal, view, seed=_seed(instance.name, "goal"))
+    timings["observe"] = time.perf_counter() - t0
+    if record_dir is not None:
+        _save_png(record_dir / "start.png", start_obs["rgb"])
+        _save_png(record_dir / "goal.png", goal_obs["rgb"])
+
+    # -- policy -------------------------------------------------------------------------------
+    t = time.perf_counter()
+    try:
+        out = policy.solve(domain, instance, start_obs, goal_obs)
+    except Exception as e:
+        return TrialResult(
+            name=instance.name,
+            state_ok=False,
+            plan_ok=False,
+            final_ok=False,
+            failure={
+                "stage": "perception",
+                "reason": f"policy raised {type(e).__name__}: {e}",
+                "traceback": traceback.format_exc(limit=-3),
+            },
+            timings={**timings, "policy": time.perf_counter() - t},
+            steps=[],
+            object_errors=[],
+        )
+    timings["policy"] = time.perf_counter() - t
+    timings.update({f"policy_{k}": v for k, v in out.timings.items()})
+
+    # -- state accuracy -----------------------------------------------------------------------
+    state_ok = True
+    if out.start_state is not None:
+        s_score = state_accuracy(domain, out.start_state, instance.start)
+        g_score = state_accuracy(domain, out.goal_state, instance.goal)
+        state_ok = s_score.correct and g_score.correct
+        if not s_score.correct:
+            failure = _state_reason(s_score, "start")
+        elif not g_score.correct:
+            failure = _state_reason(g_score, "goal")
+
+    # -- plan success (abstract, physics-free) ------------------------------------------------
+    plan_ok = False
+    steps: list[dict] = []
+    try:
+        plan = validate("plan", to_jsonable(out.plan))
+    except ContractError as e:
+        plan = None
+        failure = failure or ("planning", f"plan is malformed: {e}")
+    if plan is not None and plan["status"] != "ok":
+        failure = failure or ("planning", f"plan says infeasible: {plan['reason']}")
+    elif plan is not None:
+        steps = plan["steps"]
+        problems = check_order(domain, instance.start, steps, instance.goal, physics=False)
+        plan_ok = not problems
+        if problems:
+            failure = failure or ("planning", f"{problems[0].object}: {problems[0].problem}")
+
+    # -- execution in physics ---------------------------------------------------------------
+    final_ok = False
+    step_info: list[dict] = []
+    object_errors: list[dict] = []
+    if plan is not None and plan["status"] == "ok":
+        t = time.perf_counter()
+        model, data = _world(domain, instance)
+        recorder = _Recorder(model, domain.camera(view)) if record_dir is not None else None
+        meshes = {
+            o["id"]: (domain.mesh(o["mesh"]), domain.symmetries(o["mesh"]))
+            for o in instance.start["objects"]
+        }
+        executor = Executor(
+            model, data, meshes, weld_assist=weld_assist, record=recorder, config=config
+        )
+        result = executor.execute(plan)
+        timings["execute_wall"] = result.wall_time
+        timings["execute_sim"] = result.sim_time
+        step_info = [s.to_dict() for s in result.steps]
+        if result.failure is not None:
+            f = result.failure
+            failure = failure or (
+                "execution",
+                f"step {f.step} ({f.object}, {f.phase}): {f.kind}: {f.reason}",
+            )
+        final = _final_scene(domain, instance, model, data)
+        score = final_success(
+            domain,
+            final,
+            instance.goal,
+            released=_released(model, data, [o["id"] for o in instance.start["objects"]]),
+        )
+        final_ok = score.success
+        object_errors = [e.to_dict() for e in score.objects]
+        if not final_ok and failure is None:
+            bad = [e for e in score.objects if not e.within]
+            why = (
+                "gripper still holds an object"
+                if not score.released
+                else "not at rest"
+                if not score.at_rest
+                else f"{bad[0].id} off its goal by {1000 * bad[0].translation:.1f} mm"
+                if bad
+                else "final state wrong"
+            )
+            failure = ("execution", why)
+        timings["execute"] = time.perf_counter() - t
+        if recorder is not None and record_dir is not None:
+            recorder.write(record_dir / "trial.mp4")
+            _save_png(record_dir / "final.png", recorder.last_rgb())
+    elif failure is None:
+        failure = ("planning", "no plan to execute")
+    timings["total"] = time.perf_counter() - t0
+    return TrialResult(
+        name=instance.name,
+        state_ok=state_ok,
+        plan_ok=plan_ok,
+        final_ok=final_ok,
+        failure=None
+        if failure is None or (final_ok and state_ok and plan_ok)
+        else {"stage": failure[0], "reason": failure[1]},
+        timings=timings,
+        steps=step_info,
+        object_errors=object_errors,
+    )
+
+
+def _world(domain: Domain, instance: Instance) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    model = build_spec(domain, instance.start, with_robot=True).compile()
+    data = mujoco.MjData(model)
+    robot.park(model, data)
+    return model, data
+
+
+def _final_scene(domain: Domain, instance: Instance, model, data) -> dict:
+    objects = []
+    for o in instance.start["objects"]:
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name(o["id"]))
+        pose = np.eye(4)
+        pose[:3, :3] = data.xmat[b].reshape(3, 3)
+        pose[:3, 3] = data.xpos[b]
+        objects.append({"id": o["id"], "mesh": o["mesh"], "pose": pose})
+    return {"domain": domain.name, "objects": objects}
+
+
+def _released(model, data, object_ids) -> bool:
+    """No contact between any robot body and any object body."""
+    objects = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name(i)) for i in object_ids}
+    robot_bodies = {b for b in range(model.nbody) if model.body(b).name.startswith(robot.PREFIX)}
+    for c in data.contact[: data.ncon]:
+        pair = {int(model.geom_bodyid[c.geom1]), int(model.geom_bodyid[c.geom2])}
+        if pair & objects and pair & robot_bodies:
+            return False
+    return True
+
+
+class _Recorder:
+    """Renders the trial from the observation camera at half resolution for an MP4."""
+
+    def __init__(self, model, camera: Mapping) -> None:
+        self.camera = {
+            **camera,
+            "width": camera["width"] // 2,
+            "height": camera["height"] // 2,
+            "K": np.asarray(camera["K"], float) * np.array([[0.5], [0.5], [1.0]]),
+        }
+        self.renderer = renderer_for(model, self.camera["width"], self.camera["height"])
+        self.frames: list[np.ndarray] = []
+
+    def __call__(self, model, data) -> None:
+        self.frames.append(self.renderer.render(data, self.camera, depth=False)["rgb"])
+
+    def last_rgb(self) -> np.ndarray:
+        return self.frames[-1] if self.frames else np.zeros((8, 8, 3), np.uint8)
+
+    def write(self, path: Path) -> None:
+        import imageio.v2 as imageio
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with imageio.get_writer(path, fps=30, codec="libx264", quality=6, macro_block_size=8) as w:
+            for f in self.frames:
+                w.append_data(f)
+
+
+def _save_png(path: Path, rgb: np.ndarray) -> None:
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(np.asarray(rgb, np.uint8)).save(path)
