@@ -21,7 +21,7 @@ class SuiteChecker:
         if self._executor is None:
             import sandbox
 
-            self._executor = sandbox.make_executor(self.sandbox)
+            self._executor = sandbox.open_executor(self.sandbox)
         return self._executor
 
     def check(
@@ -38,6 +38,11 @@ class SuiteChecker:
             executor=self._get_executor(),
             out_dir=out_dir,
         )
+
+    def close(self) -> None:
+        if self._executor is not None:
+            self._executor.close()
+            self._executor = None
 
     def markdown(self, report: dict) -> str:
         from contracts.checks import report_markdown

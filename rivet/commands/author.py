@@ -35,19 +35,30 @@ def run(args: argparse.Namespace) -> int:
     import domains
     from agent.checking import SuiteChecker
     from agent.context import build_context, reference_observations
-    from agent.errors import AgentError
-    from agent.journal import Journal, latest_run_dir, new_run_dir
-    from agent.loop import AuthoringRun
-    from agent.prompt import templates_hash
-    from agent.report import summary, write_report
-    from artifacts import build_manifest, freeze
     from toolbox.docs import toolbox_docs
 
     domain = domains.load(args.domain)
     runs_root = Path(args.runs_dir)
     ctx = build_context(domain, reference_observations(domain), toolbox_docs())
     checker = SuiteChecker(sandbox=args.sandbox, thorough=args.thorough)
-    results = []
+    results: list[bool] = []
+    try:
+        _author_runs(args, domain, ctx, checker, runs_root, results)
+    finally:
+        checker.close()
+    if args.runs > 1:
+        print(f"{sum(results)}/{args.runs} runs produced a complete checked set")
+    return 0 if all(results) else 1
+
+
+def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool]) -> None:
+    from agent.errors import AgentError
+    from agent.journal import Journal, latest_run_dir, new_run_dir
+    from agent.loop import AuthoringRun
+    from agent.prompt import templates_hash
+    from agent.report import summary, write_report
+    from artifacts import build_manifest, freeze
+
     for i in range(args.runs):
         run_dir = None
         if args.resume:
@@ -88,9 +99,6 @@ def run(args: argparse.Namespace) -> int:
         state = "written" if changed else "unchanged"
         print(f"artifacts/{domain.name}: {state}, set hash {manifest['set_hash']}")
         print(f"report: {report}")
-    if args.runs > 1:
-        print(f"{sum(results)}/{args.runs} runs produced a complete checked set")
-    return 0 if all(results) else 1
 
 
 def register(sub: argparse._SubParsersAction) -> None:
