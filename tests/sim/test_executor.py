@@ -81,8 +81,12 @@ def _gripper_open_and_clear(ex: Executor, oid: str) -> bool:
 
 
 @pytest.mark.slow
-def test_moves_a_cube_from_a_to_b_and_parks():
-    ex = _executor({"a": (0.5, 0.0, 0.0), "b": (0.42, 0.18, 0.4)})
+@pytest.mark.parametrize("correction", [False, True], ids=["open-loop", "in-hand-correction"])
+def test_moves_a_cube_from_a_to_b_and_parks(correction):
+    ex = _executor(
+        {"a": (0.5, 0.0, 0.0), "b": (0.42, 0.18, 0.4)},
+        config=ExecutorConfig(in_hand_correction=correction),
+    )
     target = _at(0.58, -0.15, yaw=0.6)
     result = ex.execute(
         {"status": "ok", "steps": [{"object": "a", "target_pose": target.tolist()}]}
