@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "diff",
     "validate",
     "toolbox",
+    "transcript",
 )
 
 

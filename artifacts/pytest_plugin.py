@@ -1,0 +1,123 @@
+"""pytest plugin: `pytest --rivet-artifacts artifacts/` runs every frozen program's full check
+suite (in the sandbox) and the manifest hash checks, one test item each.
+
+Registered through the `pytest11` entry point, so any project with RIVET installed can run its
+committed artifacts' property suites in CI.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import ClassVar
+
+import pytest
+
+from agent import dag
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("rivet")
+    group.addoption(
+        "--rivet-artifacts",
+        metavar="DIR",
+        default=None,
+        help="check the frozen programs under DIR/<domain>/ (hashes and full check suites)",
+    )
+    group.addoption(
+        "--rivet-sandbox",
+        choices=("docker", "local"),
+        default="docker",
+        help="where the check suites run (default docker; local isolates nothing)",
+    )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    root = config.getoption("--rivet-artifacts")
+    if root:
+        path = Path(root)
+        if not path.is_dir():
+            raise pytest.UsageError(f"--rivet-artifacts {root}: not a directory")
+        config.args.append(str(path))
+
+
+def pytest_collect_file(parent: pytest.Collector, file_path: Path):
+    root = parent.config.getoption("--rivet-artifacts")
+    if (
+        root
+        and file_path.name == "manifest.json"
+        and file_path.parent.parent.resolve() == Path(root).resolve()
+    ):
+        return ArtifactSet.from_parent(parent, path=file_path)
+    return None
+
+
+class ArtifactSet(pytest.File):
+    def collect(self):
+        domain = self.path.parent.name
+        yield IntegrityItem.from_parent(self, name=f"{domain}::integrity", domain=domain)
+        for function in dag.authoring_order():
+            yield CheckItem.from_parent(
+                self, name=f"{domain}::{function}", domain=domain, function=function
+            )
+
+
+class IntegrityItem(pytest.Item):
+    def __init__(self, *, domain: str, **kw) -> None:
+        super().__init__(**kw)
+        self.domain = domain
+
+    def runtest(self) -> None:
+        from artifacts.store import verify
+
+        verify(self.domain, self.path.parent.parent)
+
+    def reportinfo(self):
+        return self.path, None, f"{self.domain}: manifest and file hashes"
+
+
+class CheckFailed(Exception):
+    pass
+
+
+class CheckItem(pytest.Item):
+    _executors: ClassVar[dict[str, object]] = {}
+
+    def __init__(self, *, domain: str, function: str, **kw) -> None:
+        super().__init__(**kw)
+        self.domain = domain
+        self.function = function
+
+    def runtest(self) -> None:
+        from artifacts.store import verify
+        from contracts.checks import report_markdown, run_checks
+
+        _, sources = verify(self.domain, self.path.parent.parent)
+        backend = self.config.getoption("--rivet-sandbox")
+        if backend not in self._executors:
+            import sandbox
+
+            self._executors[backend] = sandbox.open_executor(backend)
+        deps = {d: sources[d] for d in dag.CODE_DEPS[self.function]}
+        report = run_checks(
+            self.domain,
+            self.function,
+            sources[self.function],
+            deps=deps,
+            executor=self._executors[backend],
+        )
+        if not report["passed"]:
+            raise CheckFailed(report_markdown(report))
+
+    def repr_failure(self, excinfo, style=None):
+        if isinstance(excinfo.value, CheckFailed):
+            return str(excinfo.value)
+        return super().repr_failure(excinfo, style=style)
+
+    def reportinfo(self):
+        return self.path, None, f"{self.domain}: {self.function} check suite"
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    for ex in CheckItem._executors.values():
+        ex.close()  # type: ignore[attr-defined]
+    CheckItem._executors.clear()
