@@ -32,7 +32,7 @@ from sim import robot
 from sim._exec_errors import ExecutionError, FailureKind
 from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments
 from sim.grasp import Grasp, Obstacle, plan_grasps
-from sim.ik import ArmIK
+from sim.ik import ArmIK, IKSolution
 
 __all__ = [
     "ExecutionResult",
@@ -477,12 +477,16 @@ class Executor:
         two wrist angles per grasp)."""
         lo, hi = self.index.arm_range[6]
         ranked, reason = [], ""
-        for g in grasps[: 4 * self.config.max_grasp_candidates]:
+        solved: dict[bytes, IKSolution] = {}  # grasps share pick (or place) poses
+        for g in grasps[: 2 * self.config.max_grasp_candidates]:
             margins = []
             for where, T in (("grasp", g.pick_tcp), ("place", g.place_tcp)):
-                seed = robot.READY_QPOS.copy()
-                seed[0] = np.arctan2(T[1, 3], T[0, 3])
-                sol = self.ik.solve(T, seed)
+                key = np.round(T[:3], 5).tobytes()
+                if key not in solved:
+                    seed = robot.READY_QPOS.copy()
+                    seed[0] = np.arctan2(T[1, 3], T[0, 3])
+                    solved[key] = self.ik.solve(T, seed)
+                sol = solved[key]
                 if not sol.ok:
                     reason = reason or (
                         f"no IK solution at the {where} pose {np.round(T[:3, 3], 3).tolist()} "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -117,6 +118,8 @@ def test_moves_a_cube_from_a_to_b_and_parks(correction):
     ]
     assert result.sim_time > 0 and result.realtime_factor > 1.0
     assert not step.weld_engaged
+    record = json.loads(json.dumps(result.to_dict()))  # the harness stores it as JSON
+    assert record["ok"] and record["steps"][0]["object"] == "a"
 
 
 @pytest.mark.slow
