@@ -8,11 +8,11 @@ the arm moves) and then run in physics with joint position control at `control_d
 
 Grasping is by friction. An optional weld assist (off by default, `weld_assist=True`)
 welds the object to the gripper only while both finger pads touch it and the jaws are
-commanded closed; it is released the moment the jaws are commanded open. By default the
-executor is open loop: it reads object poses only to plan each grasp. Optionally
-(`ExecutorConfig.in_hand_correction`) the object's pose in the hand is read from the simulation
-after the lift and above the target, and the place pose is corrected for it, standing in for
-in-hand pose estimation. See docs/executor.md for both modes' measured accuracy.
+commanded closed; it is released the moment the jaws are commanded open. After the lift and
+again above the target the object's pose in the hand is read from the simulation and the place
+pose is corrected for it, standing in for in-hand pose estimation from a wrist camera
+(`ExecutorConfig.in_hand_correction`, on by default; off, the executor is open loop and reads
+object poses only to plan each grasp). See docs/executor.md for both modes' measured accuracy.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ class ExecutorConfig:
     open_time: float = 0.5  # [s]
     release_settle: float = 0.15  # pause before and after opening [s]
     release_height: float = 0.001  # the object is let go this far above its target [m]
-    in_hand_correction: bool = False  # read the object's pose in the hand (see module doc)
+    in_hand_correction: bool = True  # read the object's pose in the hand (see module doc)
     measure_settle: float = 0.2  # pause before reading the object's pose in the hand [s]
     park_after: bool = True
     park_time: float = 1.5  # least time of joint moves between READY and PARK [s]
