@@ -273,7 +273,7 @@ def build_inputs(
         obs = []
         chosen = [(i % len(pool), side, cam) for i, side, cam in budget.observations]
         search = instances(domain, budget.hard_seeds)
-        for i, side, cam in hardest_views(domain, search, budget.hard_observations, exclude=[]):
+        for i, side, cam in _hardest(domain.name, budget.hard_seeds, budget.hard_observations):
             if (search[i].seed, side, cam) not in {(pool[j].seed, s_, c) for j, s_, c in chosen}:
                 pool = [*pool, search[i]]
                 chosen.append((len(pool) - 1, side, cam))
@@ -304,12 +304,19 @@ def build_inputs(
     return inputs, host
 
 
+@lru_cache(maxsize=16)
+def _hardest(domain_name: str, seeds: tuple[int, ...], n: int) -> list[tuple[int, str, str]]:
+    domain = domains.load(domain_name)
+    return hardest_views(domain, instances(domain, seeds), n, exclude=[])
+
+
 def hardest_views(
     domain: Domain, pool: list, n: int, *, exclude: list[tuple[int, str, str]]
 ) -> list[tuple[int, str, str]]:
     """The `n` (instance, side, camera) views whose least visible object shows the fewest
-    pixels (an object hidden behind or under others first): the views perception finds
-    hardest, so that the checks see occlusion whenever the generator produces it."""
+    pixels: the views perception finds hardest, so that the checks see occlusion whenever the
+    generator produces it. A view hiding an object entirely counts only when the object can be
+    inferred — it holds up another object — since nothing could find it otherwise."""
     if n <= 0:
         return []
     from toolbox import render_scene
@@ -319,11 +326,16 @@ def hardest_views(
     for i, inst in enumerate(pool):
         for side in ("start", "goal"):
             recs = _records(inst.start if side == "start" else inst.goal)
+            graph = domain.relate(recs)
+            supporters = {e["target"] for e in graph["edges"] if e["type"] == "on"}
             for cam in domain.cameras:
                 if (i, side, cam) in exclude:
                     continue
                 mask = render_scene(recs, meshes, camera(domain, cam, HALF_RES))["mask"]
                 areas = np.bincount(mask[mask >= 0].ravel(), minlength=len(recs))
+                hidden = [r["id"] for r, a in zip(recs, areas, strict=True) if a == 0]
+                if any(h not in supporters for h in hidden):
+                    continue
                 scored.append((int(areas.min()), i, side, cam))
     scored.sort(key=lambda t: (t[0], t[1], t[2], t[3]))
     return [(i, side, cam) for _, i, side, cam in scored[:n]]

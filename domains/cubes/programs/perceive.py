@@ -32,6 +32,7 @@ VAL_MIN = 0.10
 MIN_PIXELS = 10
 WEAK_PIXELS = 600  # a cube seen by fewer pixels is placed by physics when needed
 REFINE_PIXELS = 1500  # a cube seen by fewer pixels is placed using free space as well
+EXPLAINED = 0.003  # a point this close to another cube's surface belongs to that cube [m]
 MAX_POINTS = 500  # per cube, for speed
 
 
@@ -78,6 +79,29 @@ def _residuals(params, pts, half):
     return outside + inside  # signed distance to the box surface [m]
 
 
+def _jacobian(params, pts, half):
+    """d residual / d (x, y, z, yaw), (n, 4): the distance gradient moved into the world."""
+    x, y, z, yaw = params
+    c, s = np.cos(yaw), np.sin(yaw)
+    d = pts - (x, y, z)
+    local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+    q = np.abs(local) - half
+    pos = np.maximum(q, 0.0)
+    norm = np.linalg.norm(pos, axis=1)
+    grad = np.sign(local) * pos / np.maximum(norm, 1e-12)[:, None]  # outside the box
+    inside = norm <= 1e-12
+    k = np.argmax(q, axis=1)
+    face = np.zeros_like(local)
+    face[np.arange(len(pts)), k] = np.sign(local[np.arange(len(pts)), k])
+    grad[inside] = face[inside]
+    A = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    dA = np.array([[-s, c, 0.0], [-c, -s, 0.0], [0.0, 0.0, 0.0]])
+    jac = np.empty((len(pts), 4))
+    jac[:, :3] = -(grad @ A)
+    jac[:, 3] = np.sum(grad * (d @ dA.T), axis=1)
+    return jac
+
+
 def _hidden_faces(params, pts, eye):
     """Fraction of points that would lie on a face turned away from the camera."""
     local = _local(params, pts)
@@ -112,6 +136,7 @@ def _fit(pts, half, eye):
                 _residuals,
                 x0=[xy0[0], xy0[1], top_z - half, yaw0 + dyaw],
                 args=(pts, half),
+                jac=_jacobian,
                 loss="soft_l1",
                 f_scale=0.002,
                 x_scale=[0.01, 0.01, 0.01, 0.3],
@@ -279,6 +304,16 @@ def perceive(observation, meshes, camera):
         if pixels < REFINE_PIXELS:
             firm = [q for n, (q, _, px) in fits.items() if n != name and px >= REFINE_PIXELS]
             pts, k = clouds[name]
+            # points on another cube's surface are colour blends at its edges, not evidence
+            keep = np.ones(len(pts), bool)
+            for q in firm:
+                keep &= np.abs(_residuals(q, pts, half)) > EXPLAINED
+            if keep.sum() < MIN_PIXELS:
+                del fits[name]
+                continue
+            if not keep.all():
+                pts = pts[keep]
+                p, top = _fit(pts, half, eye)
             p = _free_space(p, pts, half, depth, labels == k, camera, firm)
             fits[name] = (p, top, pixels)
     missing = [n for n in HUES if n not in fits]
