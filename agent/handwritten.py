@@ -62,7 +62,7 @@ def packing_client(folder: Path, out: Path, domain: str, names: tuple[str, ...])
         return response_text(source, who)
 
     calls = sum(len(s) for s in sequence.values())
-    inner = ScriptedClient([answer] * calls)
+    inner = ScriptedClient([answer] * calls, model="people (hand-written)")
     author = Author(
         kind="people",
         names=names,

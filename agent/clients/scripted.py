@@ -15,12 +15,18 @@ class ScriptedClient:
     """Replies in order; a reply may be text, a function of the request, or an exception."""
 
     def __init__(
-        self, replies: Iterable[Reply], *, budget: Budget | None = None, usd_per_call: float = 0.0
+        self,
+        replies: Iterable[Reply],
+        *,
+        budget: Budget | None = None,
+        usd_per_call: float = 0.0,
+        model: str = "scripted",
     ):
         self.replies = list(replies)
         self.requests: list[ModelRequest] = []
         self.budget = budget or Budget()
         self.usd_per_call = usd_per_call
+        self.model = model
 
     @property
     def author(self) -> Author:
@@ -38,4 +44,4 @@ class ScriptedClient:
             raise reply
         text = reply(request) if callable(reply) else reply
         self.budget.spend(self.usd_per_call)
-        return ModelResponse(text=text, model="scripted", usage=Usage(usd=self.usd_per_call))
+        return ModelResponse(text=text, model=self.model, usage=Usage(usd=self.usd_per_call))

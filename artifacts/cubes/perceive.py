@@ -1,0 +1,330 @@
+# Written by people (the RIVET team), not by a model: the hand-written reference `perceive`
+# for the cubes domain, the level a model's program should reach. It uses numpy, scipy and cv2.
+"""perceive(observation, meshes, camera) -> records: the six cubes' poses from one RGB-D image.
+
+1. Colour: each cube has its own hue; pixels are labelled by the nearest catalogue hue
+   (saturated pixels only: the table and the shadows are grey), eroded by one pixel so that
+   mixed colours and depth edges at silhouettes are left out.
+2. Geometry: the labelled pixels' depths are back-projected to world points with the given
+   camera (OpenCV convention: x right, y down, z forward; depth along the optical axis).
+3. Pose: an upright cube (x, y, z, yaw) is fitted to those points by robust least squares on
+   the box's signed distance, from a few starting yaws; cubes are upright in this domain, so
+   only the yaw is estimated, and the height is snapped to the stacking levels when close.
+The noise of a stereo sensor (≈1–2 mm, dropouts at edges) averages out over the hundreds of
+points of each face.
+"""
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+HUES = {  # catalogue colour → hue [deg] as rendered
+    "red": 0.0,
+    "green": 127.0,
+    "blue": 226.0,
+    "yellow": 51.0,
+    "purple": 278.0,
+    "cyan": 186.0,
+}
+HUE_TOL = 20.0  # [deg]
+SAT_MIN = 0.35
+VAL_MIN = 0.10
+MIN_PIXELS = 10
+WEAK_PIXELS = 600  # a cube seen by fewer pixels is placed by physics when needed
+REFINE_PIXELS = 1500  # a cube seen by fewer pixels is placed using free space as well
+EXPLAINED = 0.003  # a point this close to another cube's surface belongs to that cube [m]
+MAX_POINTS = 500  # per cube, for speed
+
+
+def _labels(rgb):
+    """Per-pixel cube index into HUES (-1: not a cube)."""
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV_FULL)  # uint8: hue in 256ths of a turn
+    ok = (hsv[..., 1] >= SAT_MIN * 255) & (hsv[..., 2] >= VAL_MIN * 255)
+    labels = np.full(rgb.shape[:2], -1, dtype=np.int32)
+    v, u = np.nonzero(ok)
+    h = hsv[v, u, 0].astype(np.float32) * (360.0 / 256.0)
+    hues = np.array(list(HUES.values()), dtype=np.float32)
+    d = np.abs((h[:, None] - hues + 180.0) % 360.0 - 180.0)  # (n, 6)
+    best = np.argmin(d, axis=1)
+    near = d[np.arange(len(h)), best] <= HUE_TOL
+    labels[v[near], u[near]] = best[near]
+    return labels
+
+
+def _points(mask, depth, camera):
+    K = np.asarray(camera["K"], dtype=float)
+    T = np.asarray(camera["T_world_camera"], dtype=float)
+    v, u = np.nonzero(mask & (depth > 0))
+    if len(u) > MAX_POINTS:  # an even, deterministic subsample
+        keep = np.linspace(0, len(u) - 1, MAX_POINTS).round().astype(int)
+        u, v = u[keep], v[keep]
+    z = depth[v, u].astype(float)
+    x = (u - K[0, 2]) * z / K[0, 0]
+    y = (v - K[1, 2]) * z / K[1, 1]
+    cam = np.stack([x, y, z], axis=1)
+    return cam @ T[:3, :3].T + T[:3, 3]
+
+
+def _local(params, pts):
+    x, y, z, yaw = params
+    c, s = np.cos(yaw), np.sin(yaw)
+    d = pts - (x, y, z)
+    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+
+
+def _residuals(params, pts, half):
+    q = np.abs(_local(params, pts)) - half
+    outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+    inside = np.minimum(q.max(axis=1), 0.0)
+    return outside + inside  # signed distance to the box surface [m]
+
+
+def _jacobian(params, pts, half):
+    """d residual / d (x, y, z, yaw), (n, 4): the distance gradient moved into the world."""
+    x, y, z, yaw = params
+    c, s = np.cos(yaw), np.sin(yaw)
+    d = pts - (x, y, z)
+    local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+    q = np.abs(local) - half
+    pos = np.maximum(q, 0.0)
+    norm = np.linalg.norm(pos, axis=1)
+    grad = np.sign(local) * pos / np.maximum(norm, 1e-12)[:, None]  # outside the box
+    inside = norm <= 1e-12
+    k = np.argmax(q, axis=1)
+    face = np.zeros_like(local)
+    face[np.arange(len(pts)), k] = np.sign(local[np.arange(len(pts)), k])
+    grad[inside] = face[inside]
+    A = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    dA = np.array([[-s, c, 0.0], [-c, -s, 0.0], [0.0, 0.0, 0.0]])
+    jac = np.empty((len(pts), 4))
+    jac[:, :3] = -(grad @ A)
+    jac[:, 3] = np.sum(grad * (d @ dA.T), axis=1)
+    return jac
+
+
+def _hidden_faces(params, pts, eye):
+    """Fraction of points that would lie on a face turned away from the camera."""
+    local = _local(params, pts)
+    axis = np.argmax(np.abs(local), axis=1)
+    normal = np.zeros_like(local)
+    normal[np.arange(len(pts)), axis] = np.sign(local[np.arange(len(pts)), axis])
+    c, s = np.cos(params[3]), np.sin(params[3])
+    world = np.stack(
+        [c * normal[:, 0] - s * normal[:, 1], s * normal[:, 0] + c * normal[:, 1], normal[:, 2]],
+        axis=1,
+    )
+    return float(np.mean(np.sum(world * (eye - pts), axis=1) < 0))
+
+
+def _fit(pts, half, eye):
+    """Upright cube (x, y, z, yaw) explaining the points, its visible faces towards `eye`."""
+    top_z = float(np.percentile(pts[:, 2], 98))
+    top = pts[pts[:, 2] >= top_z - 0.006]
+    yaw0 = 0.0
+    if len(top) >= 30:
+        (_, _), (_, _), angle = cv2.minAreaRect((top[:, :2] * 1000).astype(np.float32))
+        yaw0 = np.radians(angle)
+    away = pts[:, :2].mean(axis=0) - eye[:2]
+    away /= max(np.linalg.norm(away), 1e-9)
+    starts = [pts[:, :2].mean(axis=0) + away * half * 0.7]
+    if len(top) >= 30:
+        starts.append(top[:, :2].mean(axis=0))
+    best, best_score = None, np.inf
+    for xy0 in starts:
+        for dyaw in (0.0, np.pi / 4):
+            r = least_squares(
+                _residuals,
+                x0=[xy0[0], xy0[1], top_z - half, yaw0 + dyaw],
+                args=(pts, half),
+                jac=_jacobian,
+                loss="soft_l1",
+                f_scale=0.002,
+                x_scale=[0.01, 0.01, 0.01, 0.3],
+                max_nfev=40,
+            )
+            score = r.cost / len(pts) + 1e-4 * _hidden_faces(r.x, pts, eye)
+            if score < best_score:
+                best, best_score = r.x, score
+    x, y, z, yaw = best
+    return np.array([x, y, z, (yaw + np.pi / 4) % (np.pi / 2) - np.pi / 4]), top_z
+
+
+def _face_samples(half, n=6):
+    """Points (k, 3) and outward normals (k, 3) on the top and the four sides of a cube."""
+    t = (np.arange(n) + 0.5) / n * 2 * half - half
+    a, b = np.meshgrid(t, t)
+    a, b = a.ravel(), b.ravel()
+    pts, normals = [], []
+    for axis, sign in ((2, 1.0), (0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0)):
+        p = np.zeros((len(a), 3))
+        others = [i for i in range(3) if i != axis]
+        p[:, axis] = sign * half
+        p[:, others[0]], p[:, others[1]] = a, b
+        nrm = np.zeros(3)
+        nrm[axis] = sign
+        pts.append(p)
+        normals.append(np.tile(nrm, (len(a), 1)))
+    return np.concatenate(pts), np.concatenate(normals)
+
+
+def _free_space(p, pts, half, depth, own, camera, firm):
+    """Slide a barely seen cube to where it explains its points without hiding what the camera
+    sees behind it (its visible faces must not lie in front of farther observed surfaces) and
+    without overlapping the well-seen cubes `firm` at its level."""
+    K = np.asarray(camera["K"], dtype=float)
+    T = np.asarray(camera["T_world_camera"], dtype=float)
+    R_cw, t_cw = T[:3, :3].T, -T[:3, :3].T @ T[:3, 3]
+    level = half + 2 * half * round((p[2] - half) / (2 * half))
+    samples, normals = _face_samples(half)
+    c, s = np.cos(p[3]), np.sin(p[3])
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    local_pts, world_n = samples @ Rz.T, normals @ Rz.T
+    offsets = np.arange(-0.035, 0.03501, 0.0025)
+    grid = np.array([(p[0] + dx, p[1] + dy) for dx in offsets for dy in offsets])  # (g, 2)
+    centres = np.c_[grid, np.full(len(grid), level)]  # (g, 3)
+    world = centres[:, None, :] + local_pts[None]  # (g, k, 3)
+    eye = T[:3, 3]
+    visible = np.einsum("gkj,kj->gk", eye - world, world_n) > 0
+    cam = world @ R_cw.T + t_cw
+    z = cam[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.round(K[0, 0] * cam[..., 0] / z + K[0, 2]).astype(int)
+        v = np.round(K[1, 1] * cam[..., 1] / z + K[1, 2]).astype(int)
+    h, w = depth.shape
+    inside = visible & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    uc, vc = np.clip(u, 0, w - 1), np.clip(v, 0, h - 1)
+    observed = depth[vc, uc]
+    seen_through = inside & (observed > 0) & (observed > z + 0.008) & ~own[vc, uc]
+    violation = seen_through.sum(axis=1) / np.maximum(inside.sum(axis=1), 1)
+    cost = np.empty(len(grid))
+    for g, (x, y) in enumerate(grid):
+        r = np.abs(_residuals((x, y, level, p[3]), pts, half))
+        cost[g] = np.mean(np.minimum(r, 0.005))
+    for q in firm:
+        if abs(q[2] - level) < half:
+            cost += [0.01 * _overlap(np.array([x, y, level, p[3]]), q, half) for x, y in grid]
+    best = int(np.argmin(cost + 0.004 * violation))
+    return np.array([grid[best][0], grid[best][1], level, p[3]])
+
+
+def _overlap(a, b, half):
+    """Whether the footprints of two upright cubes (x, y, z, yaw) overlap by more than 3 mm."""
+    for p in (a, b):
+        for yaw in (p[3], p[3] + np.pi / 2):
+            axis = np.array([np.cos(yaw), np.sin(yaw)])
+            ca, cb = a[:2] @ axis, b[:2] @ axis
+            ra = half * (abs(np.cos(a[3] - yaw)) + abs(np.sin(a[3] - yaw)))
+            rb = half * (abs(np.cos(b[3] - yaw)) + abs(np.sin(b[3] - yaw)))
+            if abs(ca - cb) > ra + rb - 0.003:
+                return False
+    return True
+
+
+def _settle(fits, missing, half):
+    """Rest every cube on the table or on the cubes under it, lowest first.
+
+    A cube seen a level or more above whatever is under it stands on a cube hidden from the
+    camera: one of the `missing` ids is put there.
+    """
+    placed = {}
+    for name, (p, _top, _) in sorted(fits.items(), key=lambda kv: (kv[1][1], kv[0])):
+        p = p.copy()
+        below = [q for q in placed.values() if _overlap(p, q, half)]
+        base = max((q[2] + 2 * half for q in below), default=half)
+        while p[2] - base > 1.5 * half and missing:
+            hidden = np.array([p[0], p[1], base, p[3]])
+            placed[missing.pop(0)] = hidden
+            base += 2 * half
+        p[2] = base
+        placed[name] = p
+    return placed
+
+
+def _over(p, q, half):
+    """Whether the centre of cube p lies over the footprint of cube q."""
+    c, s = np.cos(q[3]), np.sin(q[3])
+    d = p[:2] - q[:2]
+    return abs(c * d[0] + s * d[1]) <= half and abs(-s * d[0] + c * d[1]) <= half
+
+
+def _repair(fits, placed, half, missing):
+    """Move a barely seen cube under a cube that would otherwise tip over.
+
+    A cube resting off-centre on a single cube (a pyramid's upper level) needs a second
+    supporter mirrored about its centre; when that one is hardly visible its own fit is
+    unreliable, so it is put where the cube above needs it.
+    """
+    weak = {n for n, (_, _, pixels) in fits.items() if pixels < WEAK_PIXELS}
+    weak |= set(placed) - set(fits)
+    unseen = [n for n in missing if n not in placed]
+    for name in sorted(placed, key=lambda n: (placed[n][2], n)):
+        p = placed[name]
+        if p[2] < 2 * half:
+            continue
+        under = [
+            n
+            for n, q in placed.items()
+            if n != name and abs(p[2] - q[2] - 2 * half) < 1e-6 and _overlap(p, q, half)
+        ]
+        if len(under) != 1 or _over(p, placed[under[0]], half):
+            continue
+        a = placed[under[0]]
+        spot = np.array([2 * p[0] - a[0], 2 * p[1] - a[1], a[2], a[3]])
+        options = [n for n in weak if n not in (name, under[0])]
+        if unseen:
+            placed[unseen.pop(0)] = spot
+        elif options:
+            x = min(options, key=lambda n: (np.linalg.norm(placed[n][:2] - spot[:2]), n))
+            placed[x] = spot
+    return placed
+
+
+def perceive(observation, meshes, camera):
+    rgb = np.asarray(observation["rgb"], dtype=np.uint8)
+    depth = np.asarray(observation["depth"], dtype=np.float32)
+    key = "cube" if "cube" in meshes else sorted(meshes)[0]
+    half = float(np.max(np.abs(np.asarray(meshes[key].vertices))))
+    eye = np.asarray(camera["T_world_camera"], dtype=float)[:3, 3]
+    labels = _labels(rgb)
+    kernel = np.ones((3, 3), np.uint8)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    fits, clouds = {}, {}
+    for k, name in enumerate(HUES):
+        raw = labels == k
+        mask = cv2.erode(raw.astype(np.uint8), kernel).astype(bool)
+        if mask.sum() < 3 * MIN_PIXELS:  # barely visible: keep all but one-pixel lines, which
+            opened = cv2.morphologyEx(raw.astype(np.uint8), cv2.MORPH_OPEN, cross)
+            mask = opened.astype(bool) if opened.sum() >= MIN_PIXELS else raw  # are blends
+        pts = _points(mask, depth, camera)
+        if len(pts) >= MIN_PIXELS:
+            p, top = _fit(pts, half, eye)
+            fits[name] = (p, top, int(raw.sum()))
+            clouds[name] = (pts, k)
+    for name, (p, top, pixels) in list(fits.items()):
+        if pixels < REFINE_PIXELS:
+            firm = [q for n, (q, _, px) in fits.items() if n != name and px >= REFINE_PIXELS]
+            pts, k = clouds[name]
+            # points on another cube's surface are colour blends at its edges, not evidence
+            keep = np.ones(len(pts), bool)
+            for q in firm:
+                keep &= np.abs(_residuals(q, pts, half)) > EXPLAINED
+            if keep.sum() < MIN_PIXELS:
+                del fits[name]
+                continue
+            if not keep.all():
+                pts = pts[keep]
+                p, top = _fit(pts, half, eye)
+            p = _free_space(p, pts, half, depth, labels == k, camera, firm)
+            fits[name] = (p, top, pixels)
+    missing = [n for n in HUES if n not in fits]
+    placed = _settle(fits, list(missing), half)
+    placed = _repair(fits, placed, half, missing)
+    records = []
+    for name in HUES:
+        if name not in placed:
+            continue
+        x, y, z, yaw = placed[name]
+        c, s = np.cos(yaw), np.sin(yaw)
+        pose = np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]])
+        records.append({"id": name, "mesh": key, "pose": pose})
+    return records

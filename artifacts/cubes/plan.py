@@ -1,0 +1,236 @@
+# Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
+# the cubes domain, the level a model's program should reach. It uses only numpy.
+"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal.
+
+Greedy construction: every round, place a cube whose goal supporters are already final, whose
+goal column is free and which nothing rests on, lowest goal first; when none can be placed,
+move one blocking cube to a free temporary place on the table (a cube squatting on a goal spot,
+the top of a stack in the wrong order, …). Support is read from geometry (cubes are 40 mm,
+upright): the relation graphs are not needed, so perception noise in them cannot mislead it.
+Goal poses are snapped to resting heights and to upright yaw rotations; orientation about the
+vertical is kept from the goal (cube rows and pyramids need it to fit). A goal that no plan can
+reach (floating or interpenetrating cubes, unknown ids) gives an explicit "infeasible".
+"""
+
+import numpy as np
+
+SIDE = 0.04  # cube edge [m]
+HALF = SIDE / 2
+ON_GAP = 0.008  # vertical gap still read as resting on [m]
+SAME = 0.004  # a cube this close to its goal position counts as placed [m]
+SAME_YAW = np.radians(4.0)  # … and this close in yaw, modulo 90°
+# where temporary places may go (the robot's comfortable reach in front of it) [m]
+REGION_X = (0.33, 0.67)
+REGION_Y = (-0.26, 0.26)
+REACH = 0.71
+GRID = 0.01  # spacing of candidate temporary places [m]
+CLEARANCE = 0.03  # free gap around a temporary place, for the gripper's fingers [m]
+GOAL_CLEARANCE = 0.012  # gap between a temporary place and goals still to build [m]
+
+
+def _yaw(R):
+    """Yaw [rad] in [-π/4, π/4) of an upright cube's rotation (any of its 24 symmetries)."""
+    R = np.asarray(R, dtype=float)
+    horizontal = int(np.argmin(np.abs(R[2, :])))  # a body axis lying flat
+    yaw = np.arctan2(R[1, horizontal], R[0, horizontal])
+    return float((yaw + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+
+
+def _tilt(R):
+    """Angle [rad] between the cube's most vertical body axis and the world z axis."""
+    return float(np.arccos(np.clip(np.max(np.abs(np.asarray(R, float)[2, :])), -1.0, 1.0)))
+
+
+def _pose(x, y, z, yaw):
+    c, s = np.cos(yaw), np.sin(yaw)
+    T = np.eye(4)
+    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def _corners(p):
+    """Footprint corners (4, 2) of an upright cube at p = (x, y, z, yaw)."""
+    c, s = np.cos(p[3]), np.sin(p[3])
+    local = HALF * np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=float)
+    return local @ np.array([[c, s], [-s, c]]) + p[:2]
+
+
+def _footprint_gap(a, b):
+    """Separation [m] of two footprints (negative: overlap depth), separating-axis test."""
+    best = -np.inf
+    for p in (a, b):
+        for yaw in (p[3], p[3] + np.pi / 2):
+            axis = np.array([np.cos(yaw), np.sin(yaw)])
+            pa, pb = _corners(a) @ axis, _corners(b) @ axis
+            best = max(best, pa.min() - pb.max(), pb.min() - pa.max())
+    return best
+
+
+def _rests_on(a, b):
+    """Cube a rests on cube b."""
+    return abs(a[2] - b[2] - SIDE) <= ON_GAP and _footprint_gap(a, b) < -0.002
+
+
+def _supporters(poses):
+    return {i: sorted(j for j in poses if j != i and _rests_on(poses[i], poses[j])) for i in poses}
+
+
+def _as_xyzy(T):
+    T = np.asarray(T, dtype=float)
+    return np.array([T[0, 3], T[1, 3], T[2, 3], _yaw(T[:3, :3])])
+
+
+def _yaw_close(a, b):
+    d = (a - b + np.pi / 4) % (np.pi / 2) - np.pi / 4
+    return abs(d) <= SAME_YAW
+
+
+def _in_region(xy):
+    x, y = xy
+    return (
+        REGION_X[0] <= x <= REGION_X[1]
+        and REGION_Y[0] <= y <= REGION_Y[1]
+        and np.hypot(x, y) <= REACH
+    )
+
+
+def _snap_goal(goal):
+    """Goal poses at exact resting heights, or a reason why no plan can reach them."""
+    sup = _supporters(goal)
+    snapped = {}
+    for i in sorted(goal, key=lambda k: (goal[k][2], k)):
+        p = goal[i].copy()
+        if sup[i]:
+            p[2] = max(snapped[j][2] for j in sup[i]) + SIDE
+        elif p[2] - HALF > ON_GAP:
+            return None, f"'{i}' floats {1000 * (p[2] - HALF):.0f} mm above the table in the goal"
+        else:
+            p[2] = HALF
+        snapped[i] = p
+    ids = sorted(goal)
+    for k, i in enumerate(ids):
+        for j in ids[k + 1 :]:
+            a, b = snapped[i], snapped[j]
+            if abs(a[2] - b[2]) < SIDE - 0.002 and _footprint_gap(a, b) < -0.002:
+                return None, f"'{i}' and '{j}' overlap in the goal"
+    return snapped, ""
+
+
+def _column_free(i, p, current):
+    """Nothing but i occupies the column at and above goal pose p."""
+    for j, q in current.items():
+        if j != i and q[2] > p[2] - SIDE + 0.002 and _footprint_gap(p, q) < -0.001:
+            return False
+    return True
+
+
+def _top_of(j, current):
+    """The cube at the top of the stack standing on j (j itself when it is clear)."""
+    sup = _supporters(current)
+    while True:
+        above = sorted(k for k in current if j in sup[k])
+        if not above:
+            return j
+        j = above[0]
+
+
+def _temporary(i, current, pending):
+    """A free place on the table for cube i, as near as possible to where it is."""
+    here = current[i]
+    others = [q for j, q in current.items() if j != i]
+    xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
+    ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
+    cand = np.array([(x, y) for x in xs for y in ys])
+    order = np.argsort(np.linalg.norm(cand - here[:2], axis=1), kind="stable")
+    for clearance, goal_clearance in ((CLEARANCE, GOAL_CLEARANCE), (0.015, 0.005), (0.008, 0.0)):
+        for k in order:
+            p = np.array([cand[k][0], cand[k][1], HALF, here[3]])
+            if not _in_region(p[:2]) or not all(_in_region(c) for c in _corners(p)):
+                continue
+            if any(_footprint_gap(p, q) < clearance for q in others):
+                continue
+            if any(_footprint_gap(p, g) < goal_clearance for g in pending):
+                continue
+            return p
+    return None
+
+
+def plan(start_state, goal_state):
+    start = {str(r["id"]): _as_xyzy(r["pose"]) for r in start_state["objects"]}
+    goal_raw = {str(r["id"]): r["pose"] for r in goal_state["objects"]}
+    if sorted(start) != sorted(goal_raw):
+        return {
+            "status": "infeasible",
+            "reason": f"start has {sorted(start)} but goal has {sorted(goal_raw)}",
+        }
+    for i, T in goal_raw.items():
+        if _tilt(np.asarray(T, float)[:3, :3]) > np.radians(20):
+            return {"status": "infeasible", "reason": f"'{i}' is tilted in the goal"}
+    goal, why = _snap_goal({i: _as_xyzy(T) for i, T in goal_raw.items()})
+    if goal is None:
+        return {"status": "infeasible", "reason": why}
+    for i, p in goal.items():
+        if not all(_in_region(c) or np.hypot(*c) <= REACH + 0.05 for c in _corners(p)):
+            return {"status": "infeasible", "reason": f"'{i}' is out of reach in the goal"}
+    goal_sup = _supporters(goal)
+    current = dict(start)
+    steps = []
+    for _ in range(4 * len(goal) + 4):
+        sup = _supporters(current)
+        done = {}
+
+        def is_done(i, sup=sup, done=done):
+            if i not in done:
+                done[i] = False  # guards against support cycles
+                p, g = current[i], goal[i]
+                done[i] = (
+                    np.linalg.norm(p[:3] - g[:3]) <= SAME
+                    and _yaw_close(p[3], g[3])
+                    and sup[i] == goal_sup[i]
+                    and all(is_done(j) for j in goal_sup[i])
+                )
+            return done[i]
+
+        if all(is_done(i) for i in goal):
+            return {"status": "ok", "steps": steps}
+        loaded = {j for i in current for j in sup[i]}
+        ready = sorted(
+            (i for i in goal if not is_done(i) and all(is_done(j) for j in goal_sup[i])),
+            key=lambda i: (goal[i][2], i),
+        )
+        move = None
+        for i in ready:
+            if i not in loaded and _column_free(i, goal[i], current):
+                move = (i, goal[i])
+                break
+        if move is None:
+            blocker = None
+            for i in ready:  # what stands in the way of a cube that could go to its goal
+                if i in loaded:
+                    blocker = _top_of(i, current)
+                    break
+                for j in sorted(current, key=lambda j: (-current[j][2], j)):
+                    q = current[j]
+                    above = q[2] > goal[i][2] - SIDE + 0.002
+                    if j != i and above and _footprint_gap(goal[i], q) < -0.001:
+                        blocker = _top_of(j, current)
+                        break
+                if blocker is not None:
+                    break
+            if blocker is None:  # a stack in the wrong order: take its top off
+                for i in sorted(current, key=lambda i: (-current[i][2], i)):
+                    if not is_done(i) and i not in loaded:
+                        blocker = i
+                        break
+            if blocker is None:
+                return {"status": "infeasible", "reason": "no cube can be moved"}
+            pending = [goal[i] for i in goal if not is_done(i) and i != blocker]
+            place = _temporary(blocker, current, pending)
+            if place is None:
+                return {"status": "infeasible", "reason": f"no free place to put '{blocker}' down"}
+            move = (blocker, place)
+        i, p = move
+        current[i] = p
+        steps.append({"object": i, "target_pose": _pose(*p).tolist()})
+    return {"status": "infeasible", "reason": f"no plan within {len(steps)} moves"}
