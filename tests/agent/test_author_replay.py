@@ -1,4 +1,5 @@
-"""`rivet author DOMAIN` offline: replays the committed reference transcript through the real
+"""`rivet author DOMAIN` offline (default matching by function and attempt, so a renderer that
+draws a pixel differently on another machine only warns): replays the committed reference transcript through the real
 checks in the Docker sandbox, repairs at least once, and reproduces the committed artifacts."""
 
 from __future__ import annotations
