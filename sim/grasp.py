@@ -36,8 +36,10 @@ class FingerModel:
     is a stack of boxes, `segments`, given as (from, to) height above the fingertip, how far
     the finger reaches outwards beyond its pad's contact face, and its half width across the
     closing direction. From `linkage_from` up to `palm_from` the couplers and drivers reach out
-    to at least `linkage_outer` from the centre line (they splay as the jaws close); above
-    that the palm and the arm fill `palm_half`.
+    to at least `linkage_outer` from the centre line (they splay as the jaws close). Above
+    that, `palm` boxes (from, to, x_min, x_max, y_min, y_max) in the TCP frame: the gripper's
+    base, then the FR3's link 7, which is rigid with the TCP and juts out on one side (so the
+    two wrist yaws of a grasp differ); the last box reaches 1 m up and stands for the arm.
     """
 
     segments: tuple[tuple[float, float, float, float], ...] = (
@@ -45,11 +47,14 @@ class FingerModel:
         (0.040, 0.060, 0.033, 0.017),
     )
     linkage_from: float = 0.060
-    linkage_outer: float = 0.070
-    linkage_depth: float = 0.033
+    linkage_outer: float = 0.064
+    linkage_depth: float = 0.0315
     linkage_half_width: float = 0.020
     palm_from: float = 0.120
-    palm_half: tuple[float, float] = (0.045, 0.076)
+    palm: tuple[tuple[float, float, float, float, float, float], ...] = (
+        (0.120, 0.160, -0.038, 0.038, -0.038, 0.038),
+        (0.160, 1.000, -0.082, 0.042, -0.042, 0.082),
+    )
     clearances: tuple[float, ...] = (0.008, 0.004)  # jaw opening beyond the object's width,
     # per side, for the approach and the release: the first that clears the neighbours is used
     min_clearance: float = 0.0025  # the least per-side opening allowed for wide objects
@@ -74,8 +79,7 @@ class FingerModel:
 
     def boxes(self, gap: float, tip: float, margin: float) -> list[tuple[np.ndarray, np.ndarray]]:
         """Boxes (centre (3,), half extents (3,)) in the TCP frame (z towards the fingertips)
-        for jaws `gap` apart with the fingertips at depth `tip`, inflated by `margin`; the palm
-        box reaches 1 m back."""
+        for jaws `gap` apart with the fingertips at depth `tip`, inflated by `margin`."""
         out = []
         y0 = gap / 2
         layers = [(lo, hi, y0, y0 + depth, hw) for lo, hi, depth, hw in self.segments]
@@ -90,9 +94,10 @@ class FingerModel:
         centre = np.array([0.0, 0.0, tip - ceiling - 0.5])
         half = np.array([self.inner_half_width, y0, 0.5]) + np.array([margin, 0.0, margin])
         out.append((centre, half))
-        centre = np.array([0.0, 0.0, tip - self.palm_from - 0.5])
-        half = np.array([self.palm_half[0], self.palm_half[1], 0.5]) + margin
-        out.append((centre, half))
+        for lo, hi, x0, x1, y_lo, y_hi in self.palm:
+            centre = np.array([(x0 + x1) / 2, (y_lo + y_hi) / 2, tip - (lo + hi) / 2])
+            half = np.array([(x1 - x0) / 2, (y_hi - y_lo) / 2, (hi - lo) / 2]) + margin
+            out.append((centre, half))
         return out
 
 
@@ -412,16 +417,25 @@ def _contact_patch(
             elif not c and start is not None:
                 runs.append((float(us[start]) - step_u / 2, float(us[i - 1]) + step_u / 2))
                 start = None
-        u0, u1 = min(runs, key=lambda r: max(r[0] - u_com, u_com - r[1], 0.0))
-        u_c = (
-            (u0 + u1) / 2
-            if u1 - u0 <= 2 * half_pad
-            else float(np.clip(u_com, u0 + half_pad, u1 - half_pad))
-        )
-        centre = u_c * u_axis + mid_plane * n
-        centre[2] = z_tip
-        area = min(u1 - u0, table.pad_width) * (z_top - z_tip)
-        out.append(_FacePair(closing=n, width=width, centre=centre, tip_z=z_tip, contact_area=area))
+        runs.sort(key=lambda r: max(r[0] - u_com, u_com - r[1], 0.0))  # nearest the COM first
+        for rank, (u0, u1) in enumerate(runs[:3]):
+            area = min(u1 - u0, table.pad_width) * (z_top - z_tip)
+            if u1 - u0 <= 2 * half_pad:
+                positions = [(u0 + u1) / 2]
+            else:
+                lo_u, hi_u = u0 + half_pad, u1 - half_pad
+                u_c = float(np.clip(u_com, lo_u, hi_u))
+                positions = [u_c]
+                if rank == 0:  # along a long face: off-centre grips dodge a neighbour
+                    for u in (lo_u, hi_u, (lo_u + u_c) / 2, (hi_u + u_c) / 2):
+                        if all(abs(u - p) > 0.005 for p in positions):
+                            positions.append(u)
+            for u in positions:
+                centre = u * u_axis + mid_plane * n
+                centre[2] = z_tip
+                out.append(
+                    _FacePair(closing=n, width=width, centre=centre, tip_z=z_tip, contact_area=area)
+                )
     return out
 
 
