@@ -86,6 +86,7 @@ class TrialResult:
     timings: dict[str, float]
     steps: list[dict]
     object_errors: list[dict]
+    execution_failure: dict | None = None  # the executor's own failure (step, kind, phase, reason)
 
     def to_dict(self) -> dict:
         return {
@@ -97,6 +98,7 @@ class TrialResult:
             "timings": {k: round(v, 4) for k, v in self.timings.items()},
             "steps": self.steps,
             "object_errors": self.object_errors,
+            "execution_failure": self.execution_failure,
         }
 
 
@@ -176,14 +178,19 @@ def run_trial(
     # -- plan success (abstract, physics-free) ------------------------------------------------
     plan_ok = False
     steps: list[dict] = []
+    raw = to_jsonable(out.plan)
+    valid = False
     try:
-        plan = validate("plan", to_jsonable(out.plan))
+        plan = validate("plan", raw)
+        valid = True
     except ContractError as e:
         plan = None
         failure = failure or ("planning", f"plan is malformed: {e}")
+        if _executable_shape(raw):
+            plan = raw  # let the executor refuse it step by step, naming the step
     if plan is not None and plan["status"] != "ok":
         failure = failure or ("planning", f"plan says infeasible: {plan['reason']}")
-    elif plan is not None:
+    elif valid and plan is not None:
         steps = plan["steps"]
         problems = check_order(domain, instance.start, steps, instance.goal, physics=False)
         plan_ok = not problems
@@ -192,6 +199,7 @@ def run_trial(
 
     # -- execution in physics ---------------------------------------------------------------
     final_ok = False
+    execution_failure: dict | None = None
     step_info: list[dict] = []
     object_errors: list[dict] = []
     if plan is not None and plan["status"] == "ok":
@@ -211,6 +219,7 @@ def run_trial(
         step_info = [s.to_dict() for s in result.steps]
         if result.failure is not None:
             f = result.failure
+            execution_failure = result.failure.to_dict()
             failure = failure or (
                 "execution",
                 f"step {f.step} ({f.object}, {f.phase}): {f.kind}: {f.reason}",
@@ -254,6 +263,17 @@ def run_trial(
         timings=timings,
         steps=step_info,
         object_errors=object_errors,
+        execution_failure=execution_failure,
+    )
+
+
+def _executable_shape(plan: Any) -> bool:
+    """An `ok` plan whose steps have the right keys, whatever their poses hold."""
+    return (
+        isinstance(plan, dict)
+        and plan.get("status") == "ok"
+        and isinstance(plan.get("steps"), list)
+        and all(isinstance(s, dict) and {"object", "target_pose"} <= set(s) for s in plan["steps"])
     )
 
 
