@@ -124,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
         mutants = [m for m in mutants if m.name in only]
     args.out.mkdir(parents=True, exist_ok=True)
     times: list[float] = []
-    correct_rows, mutant_rows = [], []
+    correct_rows: list[dict[str, Any]] = []
+    mutant_rows: list[dict[str, Any]] = []
     with sandbox.open_executor(args.sandbox) as ex:
         repeats = 0 if only else args.repeats
         for fn in FUNCTIONS if repeats else ():

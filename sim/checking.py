@@ -288,7 +288,7 @@ def build_inputs(
             recs = scene_of(i, side)
             name = f"{pool[i].name}/{side}/{cam}"
             clean = _observation(domain.name, pool[i].seed, side, cam, 1)
-            full = _noisy(clean, pool[i].seed)
+            full = _noisy(clean, pool[i].seed or 0)
             obs.append(
                 {
                     "name": name,
@@ -634,8 +634,8 @@ def _perceive_images(dom: Domain, host: list[HostCase], outputs: Mapping, out_di
         f"{images.DEPTH_MEDIAN_MAX * 1000:.0f} mm",
     )
     rerender = outputs.get("rerender", {})
-    worst = None
-    first_problem = None
+    worst: tuple[float, HostCase, Any, list] | None = None
+    first_problem: tuple[HostCase, list[str], list] | None = None
     for case in host:
         got = rerender.get(case.name)
         if got is None:

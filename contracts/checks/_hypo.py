@@ -56,7 +56,7 @@ def run_property(
     Inputs must be hashable (tuples of ints and strings): they key the memo.
     """
     memo: dict[Hashable, Failure | None] = {}
-    state = {"first_failure_at": None}
+    state: dict[str, int | None] = {"first_failure_at": None}
 
     def test(x: Hashable) -> None:
         if x in memo:

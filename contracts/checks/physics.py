@@ -525,13 +525,13 @@ def apply_plan(
         pairs = _pairs(bodies, contact_tol)
         hits = collisions(bodies, tol=pen_tol, pairs=pairs)
         if hits:
-            worst = max(hits, key=lambda c: (oid in (c.a, c.b), c.depth))
+            hit = max(hits, key=lambda c: (oid in (c.a, c.b), c.depth))
             return PlanOutcome(
                 problem=PlanProblem(
                     kind="collision",
                     step=k,
                     object=oid,
-                    message=f"after step {k} (moving '{oid}'): {worst.describe()}",
+                    message=f"after step {k} (moving '{oid}'): {hit.describe()}",
                 ),
                 states=states,
             )
