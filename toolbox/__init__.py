@@ -2,7 +2,8 @@
 
 vision and segmentation (cameras, point clouds, planes, colour/depth masks), polygons (2D
 shape fitting), registration (ICP, global registration, mesh pose from points), render
-(offscreen rendering with the OpenCV camera), contacts (collisions, support), geometry (SE(3)),
+(offscreen rendering with the OpenCV camera), contacts (collisions, support), stability
+(convex pieces, resting poses, loads), geometry (SE(3)),
 graphs (relation graphs), search (A*/BFS). `rivet toolbox docs` prints the prompt text.
 """
 
@@ -71,6 +72,15 @@ from toolbox.segmentation import (
     segment_colored_objects,
     segment_hue,
 )
+from toolbox.stability import (
+    RestingPose,
+    Shape,
+    collisions,
+    separation,
+    stable_poses,
+    supports,
+    unstable_objects,
+)
 from toolbox.vision import (
     backproject_pixels,
     cluster_points,
@@ -91,7 +101,9 @@ __all__ = [
     "Region",
     "RegistrationResult",
     "RendererUnavailableError",
+    "RestingPose",
     "SearchResult",
+    "Shape",
     "ToolboxError",
     "add_relation",
     "approximate_polygon",
@@ -102,6 +114,7 @@ __all__ = [
     "bfs",
     "clean_mask",
     "cluster_points",
+    "collisions",
     "compare_renders",
     "connected_components",
     "cube_symmetries",
@@ -147,9 +160,13 @@ __all__ = [
     "segment_above_plane",
     "segment_colored_objects",
     "segment_hue",
+    "separation",
+    "stable_poses",
     "state_key",
     "support_relations",
+    "supports",
     "transform_points",
+    "unstable_objects",
     "unsupported_objects",
     "voxel_downsample",
     "world_bounds",

@@ -24,6 +24,7 @@ MODULES = (
     "registration",
     "render",
     "contacts",
+    "stability",
     "graphs",
     "search",
     "errors",
