@@ -10,7 +10,7 @@ export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 export MENAGERIE_ROOT ?= $(abspath ../shared/menagerie)
 
-.PHONY: help venv system test lint author eval bench sandbox-base sandbox-image format
+.PHONY: help venv system test lint author eval bench bench-checks sandbox-base sandbox-image format
 
 help: ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN{FS=":.*## "}{printf "  make %-14s %s\n", $$1, $$2}'
@@ -42,11 +42,16 @@ format: venv ## apply ruff's formatting and safe fixes
 author: venv system sandbox-image ## author DOMAIN's programs: replays its reference transcript, or uses MODEL when ANTHROPIC_API_KEY is set
 	.venv/bin/rivet author $(DOMAIN) $(if $(ANTHROPIC_API_KEY),--model $(MODEL))
 
-eval: venv ## evaluate DOMAIN's frozen artifacts on the benchmark set
-	.venv/bin/rivet eval $(DOMAIN) --policy artifacts
+POLICY ?= artifacts
+WORKERS ?= 2
+eval: venv system ## evaluate DOMAIN on its 60 benchmark trials (POLICY=artifacts|oracle, WORKERS=2)
+	.venv/bin/rivet eval $(DOMAIN) --policy $(POLICY) --workers $(WORKERS)
 
-bench: venv system sandbox-image ## benchmarks: sandbox overhead, rendering, trial throughput
+bench: venv system sandbox-image ## benchmarks: sandbox overhead, rendering, check mutants
 	$(PY) -m benchmarks.run
+
+bench-checks: venv system sandbox-image ## the mutation benchmark of the check suites
+	$(PY) -m benchmarks.run checks
 
 sandbox-base: ## build the offline sandbox base image (debootstrap + docker import)
 	@bash sandbox/build_base.sh
