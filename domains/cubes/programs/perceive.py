@@ -184,7 +184,10 @@ def _free_space(p, pts, half, depth, own, camera, firm):
     offsets = np.arange(-0.035, 0.03501, 0.0025)
     grid = np.array([(p[0] + dx, p[1] + dy) for dx in offsets for dy in offsets])  # (g, 2)
     levels = np.full(len(grid), half)
+    top = float(np.percentile(pts[:, 2], 98))
     for q in sorted(firm, key=lambda q: q[2]):
+        if q[2] + half > top - 0.005:
+            continue  # not below what is seen of this cube: it cannot hold it up
         near = np.linalg.norm(grid - q[:2], axis=1) < 4 * half
         for g in np.nonzero(near)[0]:
             if _overlap(np.array([*grid[g], levels[g], p[3]]), q, half):
