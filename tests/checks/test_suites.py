@@ -184,3 +184,11 @@ def test_image_and_accuracy_perceive_ids_swapped(check):
         "'red'" in by_name(report, "property.accuracy")["message"]
         or "'green'" in by_name(report, "property.accuracy")["message"]
     )
+
+
+def test_interface_process_dies(check):
+    report = check(
+        "relate", "import os\n\nRELATIONS = {}\n\ndef relate(records, meshes):\n    os._exit(3)\n"
+    )
+    assert report["first_failure"] == "interface.runs"
+    assert "crashed" in by_name(report, "interface.runs")["message"]
