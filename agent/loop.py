@@ -128,8 +128,8 @@ class AuthoringRun:
                 self.journal.save_report(function, attempt, report, markdown)
             else:
                 self.journal.save_draft(function, attempt, source)
-                report = self.journal.saved_report(function, attempt)
-                if report is None:
+                saved = self.journal.saved_report(function, attempt)
+                if saved is None:
                     self._say(function, attempt, "checking the draft")
                     deps = {d: frozen[d] for d in dag.CODE_DEPS[function]}
                     report = self.checker.check(
@@ -142,6 +142,7 @@ class AuthoringRun:
                     markdown = self.checker.markdown(report)
                     self.journal.save_report(function, attempt, report, markdown)
                 else:
+                    report = saved
                     markdown = self.journal.saved_markdown(
                         function, attempt
                     ) or self.checker.markdown(report)

@@ -72,8 +72,8 @@ class Transcript:
                 )
                 for e in meta["responses"]
             ]
-        except (KeyError, TypeError, ValueError) as e:
-            raise TranscriptError(f"{meta_path}: malformed ({type(e).__name__}: {e})") from None
+        except (KeyError, TypeError, ValueError) as err:
+            raise TranscriptError(f"{meta_path}: malformed ({type(err).__name__}: {err})") from None
         texts = {}
         for e in entries:
             p = directory / e.file

@@ -246,7 +246,7 @@ def progress_bar(total: int, desc: str):
     from tqdm import tqdm
 
     bar = tqdm(total=total, desc=desc, unit="trial", file=sys.stderr, dynamic_ncols=True)
-    counts = Counter()
+    counts: Counter[str] = Counter()
 
     def update(result: dict) -> None:
         counts["final"] += bool(result["final_ok"])

@@ -207,7 +207,7 @@ def run_trial(
         model, data = _world(domain, instance)
         recorder = _Recorder(model, domain.camera(view)) if record_dir is not None else None
         meshes = {
-            o["id"]: (domain.mesh(o["mesh"]), domain.symmetries(o["mesh"]))
+            o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
             for o in instance.start["objects"]
         }
         executor = Executor(
@@ -329,7 +329,10 @@ class _Recorder:
         import imageio.v2 as imageio
 
         path.parent.mkdir(parents=True, exist_ok=True)
-        with imageio.get_writer(path, fps=30, codec="libx264", quality=6, macro_block_size=8) as w:
+        writer: Any = imageio.get_writer(
+            path, fps=30, codec="libx264", quality=6, macro_block_size=8
+        )
+        with writer as w:
             for f in self.frames:
                 w.append_data(f)
 
