@@ -3,7 +3,7 @@
 vision and segmentation (cameras, point clouds, planes, colour/depth masks), polygons (2D
 shape fitting), registration (ICP, global registration, mesh pose from points), render
 (offscreen rendering with the OpenCV camera), contacts (collisions, support), stability
-(convex pieces, resting poses, loads), geometry (SE(3)),
+(convex pieces, resting poses, loads), packing (footprints, gaps, finger room), geometry (SE(3)),
 graphs (relation graphs), search (A*/BFS). `rivet toolbox docs` prints the prompt text.
 """
 
@@ -44,6 +44,7 @@ from toolbox.graphs import (
     relations_of_type,
     removal_order,
 )
+from toolbox.packing import finger_footprints, footprint, polygon_gap, spread_footprints
 from toolbox.polygons import (
     PolygonFit,
     Rectangle,
@@ -122,9 +123,11 @@ __all__ = [
     "depth_to_points",
     "distance_to_plane",
     "estimate_table_plane",
+    "finger_footprints",
     "fit_plane_ransac",
     "fit_polygon_pose",
     "fit_rectangle",
+    "footprint",
     "global_registration",
     "graph_from_json",
     "graph_to_json",
@@ -140,6 +143,7 @@ __all__ = [
     "objects_above",
     "overlay_mask",
     "pixels_to_plane",
+    "polygon_gap",
     "polygon_symmetry",
     "pose_distance",
     "pose_from_xyz_yaw",
@@ -161,6 +165,7 @@ __all__ = [
     "segment_colored_objects",
     "segment_hue",
     "separation",
+    "spread_footprints",
     "stable_poses",
     "state_key",
     "support_relations",

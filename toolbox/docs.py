@@ -25,6 +25,7 @@ MODULES = (
     "render",
     "contacts",
     "stability",
+    "packing",
     "graphs",
     "search",
     "errors",
