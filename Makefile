@@ -19,7 +19,7 @@ $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install -q uv
 
 .venv/.synced: pyproject.toml uv.lock | $(UV)
-	$(UV) sync --frozen
+	$(UV) sync --frozen --all-extras
 	@touch $@
 
 venv: .venv/.synced ## create .venv from the lock file (uv)

@@ -127,10 +127,24 @@ def run_eval(
     *,
     workers: int = 1,
     progress: Callable[[dict], None] | None = None,
+    ray_address: str | None = None,
 ) -> dict:
-    """Run every instance (JSON dicts) and summarise; results keep the instances' order."""
+    """Run every instance (JSON dicts) and summarise; results keep the instances' order.
+
+    `ray_address` fans the trials out to Ray actors (see `rivet.scaleout`) instead of local
+    processes.
+    """
     results: dict[int, dict] = {}
-    if workers <= 1:
+    if ray_address is not None:
+        from rivet.scaleout import map_with_actors
+
+        for i, result in map_with_actors(
+            ray_address, _init_worker, config, _run_one, list(instances), workers=workers
+        ):
+            results[i] = result
+            if progress:
+                progress(result)
+    elif workers <= 1:
         _init_worker(config)
         for i, inst in enumerate(instances):
             results[i] = _run_one(inst)

@@ -39,6 +39,8 @@ def run(args: argparse.Namespace) -> int:
 
     domain = domains.load(args.domain)
     runs_root = Path(args.runs_dir)
+    if args.ray:
+        return _author_on_ray(args, domain.name, runs_root)
     ctx = build_context(domain, reference_observations(domain), toolbox_docs())
     checker = SuiteChecker(sandbox=args.sandbox, thorough=args.thorough)
     results: list[bool] = []
@@ -49,6 +51,56 @@ def run(args: argparse.Namespace) -> int:
     if args.runs > 1:
         print(f"{sum(results)}/{args.runs} runs produced a complete checked set")
     return 0 if all(results) else 1
+
+
+def _run_cli(argv: list[str]) -> int:
+    import subprocess
+
+    return subprocess.run(argv).returncode
+
+
+def _author_on_ray(args: argparse.Namespace, domain: str, runs_root: Path) -> int:
+    """`--runs N --ray ADDRESS`: each run is one Ray task running `rivet author --runs 1` on a
+    node (which needs the project, Docker and the sandbox image; the key, if any, comes from
+    the node's own ANTHROPIC_API_KEY)."""
+    from rivet.scaleout import map_tasks
+
+    source = (
+        ["--model", args.model]
+        if args.model
+        else ["--replay", str(Path(args.replay).resolve())]
+        if args.replay
+        else []
+    )
+    argvs = []
+    for k in range(args.runs):
+        out = (runs_root / f"ray-{k + 1:03d}").resolve()
+        argvs.append(
+            [
+                sys.executable,
+                "-m",
+                "rivet.cli",
+                "author",
+                domain,
+                *source,
+                "--runs-dir",
+                str(out),
+                "--artifacts",
+                str(out / "artifacts"),
+                "--attempts",
+                str(args.attempts),
+                "--sandbox",
+                args.sandbox,
+            ]
+            + (["--max-usd", str(args.max_usd)] if args.max_usd is not None else [])
+            + (["--max-calls", str(args.max_calls)] if args.max_calls is not None else [])
+        )
+    codes = map_tasks(args.ray, _run_cli, argvs)
+    ok = sum(c == 0 for c in codes)
+    print(
+        f"{ok}/{args.runs} runs produced a complete checked set (Ray: {args.ray}); runs under {runs_root}/ray-*"
+    )
+    return 0 if ok == args.runs else 1
 
 
 def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool]) -> None:

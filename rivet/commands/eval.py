@@ -78,6 +78,7 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str) -> dict:
         config,
         instances,
         workers=args.workers,
+        ray_address=args.ray,
         progress=None if args.quiet else progress_bar(len(instances), f"{domain_name}/{view}"),
     )
     print(table(summary))
@@ -163,6 +164,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="instance files to run instead of the benchmark",
     )
     p.add_argument("--workers", type=int, default=1, metavar="N", help="trials in N processes")
+    p.add_argument(
+        "--ray",
+        default=None,
+        metavar="ADDRESS",
+        help="fan trials out to a Ray cluster ('local' starts one)",
+    )
     p.add_argument("--json", default=None, metavar="OUT", help="write the results JSON here")
     p.add_argument(
         "--record",
