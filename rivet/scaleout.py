@@ -56,7 +56,7 @@ def map_with_actors(
         def run(self, index: int, item: Any) -> tuple[int, Any]:
             return index, work(item)
 
-    actors = [_Worker.remote() for _ in range(max(1, workers))]
+    actors = [_Worker.remote() for _ in range(max(1, workers))]  # type: ignore[attr-defined]
     pending = [actors[i % len(actors)].run.remote(i, item) for i, item in enumerate(items)]
     while pending:
         done, pending = ray.wait(pending, num_returns=1)
