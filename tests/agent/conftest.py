@@ -82,6 +82,3 @@ def checker() -> ToyChecker:
     return ToyChecker()
 
 
-@pytest.fixture(autouse=True)
-def _forbid_model_api(monkeypatch):
-    monkeypatch.setenv("RIVET_FORBID_MODEL_API", "1")
