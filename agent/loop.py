@@ -187,8 +187,8 @@ def _report_images(report: dict, images_dir: Path, limit: int = 4) -> tuple[Imag
             continue
         for image in check.get("images", []):
             path = Path(image["path"])
-            if not path.is_absolute():
-                path = images_dir / path
+            if not path.is_file():  # paths are relative to where the checks ran, or to the folder
+                path = images_dir / path.name
             if path.is_file() and len(out) < limit:
                 out.append(
                     ImageBlock(

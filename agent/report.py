@@ -82,7 +82,8 @@ def write_report(journal: Journal, title: str) -> Path:
                 for c in report["checks"]:
                     for image in c.get("images", []):
                         p = Path(image["path"])
-                        p = p if p.is_absolute() else journal.images_dir(function, k) / p
+                        if not p.is_file():
+                            p = journal.images_dir(function, k) / p.name
                         if p.is_file():
                             out.append(
                                 f"<p>{html.escape(c['name'])}: {html.escape(image.get('caption', ''))}</p>{_img(p)}"

@@ -80,5 +80,3 @@ def bad(function: str) -> str:
 @pytest.fixture
 def checker() -> ToyChecker:
     return ToyChecker()
-
-

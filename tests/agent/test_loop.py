@@ -129,3 +129,34 @@ def test_malformed_responses_become_feedback(tmp_path, checker, reply, fragment)
     from contracts import validate
 
     validate("check_report", report)
+
+
+def test_failure_images_reach_the_model_and_the_html_report(tmp_path, checker, monkeypatch):
+    from PIL import Image
+
+    from agent.clients.base import ImageBlock
+    from agent.report import write_report
+
+    monkeypatch.chdir(tmp_path)
+    plain = checker.check
+
+    def with_image(domain, function, source, *, deps, out_dir):
+        report = plain(domain, function, source, deps=deps, out_dir=out_dir)
+        png = out_dir / "overlay.png"
+        Image.new("RGB", (8, 8), (255, 0, 0)).save(png)
+        # paths as the checks write them: relative to the working directory
+        report["checks"][0]["images"] = [
+            {"path": str(png.relative_to(tmp_path)), "caption": "overlay"}
+        ]
+        return report
+
+    monkeypatch.setattr(checker, "check", with_image)
+    client = ScriptedClient(
+        [good("render"), bad("perceive"), good("perceive"), good("relate"), good("plan")]
+    )
+    r = run(tmp_path, client, checker)
+    r.run()
+    repair = client.requests[2]
+    assert any(isinstance(b, ImageBlock) for b in repair.content)
+    html = write_report(r.journal, "toy").read_text()
+    assert html.count("data:image/png;base64") >= 2
