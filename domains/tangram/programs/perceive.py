@@ -213,7 +213,9 @@ class _Piece:
         valid = d > 0
         # side faces lie behind a face's plane along the ray: a narrow window on that side
         top = own & valid & (d - top_d <= SIDE_TOL) & (top_d - d <= HEIGHT_TOL)
-        knob = knob_mask[v0:v1, u0:u1] & valid & (d - knob_d <= SIDE_TOL) & (knob_d - d <= HEIGHT_TOL)
+        knob = (
+            knob_mask[v0:v1, u0:u1] & valid & (d - knob_d <= SIDE_TOL) & (knob_d - d <= HEIGHT_TOL)
+        )
         # where this piece's top face may be: seen, hidden by something nearer, or unknown
         allowed = top | (valid & (d < top_d - NEARER)) | (own & ~valid)
         self.dt = cv2.distanceTransform((~allowed).astype(np.uint8), cv2.DIST_L2, 5)
@@ -245,7 +247,7 @@ class _Piece:
         r_in = np.maximum(val[np.arange(len(k)), k] - INSIDE_SLACK, 0.0)
         # 2. outline samples on pixels that are this top face or hidden
         world = self.shape.samples @ R.T + t
-        uv, z, duv = self.view.project_plane(world, TOP)
+        uv, _, duv = self.view.project_plane(world, TOP)
         uv = uv - self.origin
         h, w = self.dt.shape
         inside = (uv[:, 0] >= 0) & (uv[:, 0] < w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] < h - 1)
@@ -292,10 +294,8 @@ class _Piece:
         return self._last[1:]
 
     def fit(self, period):
-        if len(self.knob) >= 10:
-            centre = np.median(self.knob, axis=0)
-        else:
-            centre = self.top.mean(axis=0)
+        # the knob top marks the centroid; without it, the top face's mean is a start
+        centre = np.median(self.knob, axis=0) if len(self.knob) >= 10 else self.top.mean(axis=0)
         yaws = np.arange(0.0, period - 1e-9, YAW_STEP)
         full = (self.top, self.knob, self.shape.samples)
         # the sweep on a sparse subset of the evidence
@@ -362,6 +362,8 @@ def perceive(observation, meshes, camera):
             continue
         x, y, yaw = piece.fit(2 * np.pi / SYMMETRY.get(key, 1))
         c, s = np.cos(yaw), np.sin(yaw)
-        pose = np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+        pose = np.array(
+            [[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+        )
         records.append({"id": oid, "mesh": key, "pose": pose})
     return records
