@@ -30,7 +30,7 @@ HUE_TOL = 20.0  # [deg]
 SAT_MIN = 0.35
 VAL_MIN = 0.10
 MIN_PIXELS = 10
-WEAK_PIXELS = 600  # a cube seen by fewer pixels is placed by physics when needed
+WEAK_PIXELS = 1500  # a cube seen by fewer pixels is placed by physics when needed
 REFINE_PIXELS = 1500  # a cube seen by fewer pixels is placed using free space as well
 EXPLAINED = 0.003  # a point this close to another cube's surface belongs to that cube [m]
 MAX_POINTS = 500  # per cube, for speed
@@ -167,12 +167,13 @@ def _face_samples(half, n=6):
     return np.concatenate(pts), np.concatenate(normals)
 
 
-def _free_space(p, pts, half, depth, own, camera, firm):
+def _free_space(p, pts, half, depth, own, camera, firm, others):
     """Slide a barely seen cube to where it explains its points without hiding what the camera
     sees behind it (its visible faces must not lie in front of farther observed surfaces).
 
-    Each candidate place rests on the table or on the well-seen cubes `firm` under it, so a
-    sliver of a cube on top of a stack is put on the stack, not in it.
+    Each candidate place rests on the table or on the `others` under it, so a sliver of a
+    cube on top of a stack is put on the stack, not in it; it may not overlap a well-seen
+    cube (`firm`) at its own level.
     """
     K = np.asarray(camera["K"], dtype=float)
     T = np.asarray(camera["T_world_camera"], dtype=float)
@@ -183,9 +184,10 @@ def _free_space(p, pts, half, depth, own, camera, firm):
     local_pts, world_n = samples @ Rz.T, normals @ Rz.T
     offsets = np.arange(-0.035, 0.03501, 0.0025)
     grid = np.array([(p[0] + dx, p[1] + dy) for dx in offsets for dy in offsets])  # (g, 2)
-    levels = np.full(len(grid), half)
+    # at least the level its points show: what holds it up may be hidden
+    levels = np.full(len(grid), half + 2 * half * max(0, round((p[2] - half) / (2 * half))))
     top = float(np.percentile(pts[:, 2], 98))
-    for q in sorted(firm, key=lambda q: q[2]):
+    for q in sorted(others, key=lambda q: q[2]):
         if q[2] + half > top - 0.005:
             continue  # not below what is seen of this cube: it cannot hold it up
         near = np.linalg.norm(grid - q[:2], axis=1) < 4 * half
@@ -211,6 +213,12 @@ def _free_space(p, pts, half, depth, own, camera, firm):
     for g, (x, y) in enumerate(grid):
         r = np.abs(_residuals((x, y, levels[g], p[3]), pts, half))
         cost[g] = np.mean(np.minimum(r, 0.005))
+    for q in firm:
+        for g in np.nonzero(np.linalg.norm(grid - q[:2], axis=1) < 4 * half)[0]:
+            if abs(q[2] - levels[g]) < half and _overlap(
+                np.array([*grid[g], levels[g], p[3]]), q, half
+            ):
+                cost[g] += 0.01
     best = int(np.argmin(cost + 0.004 * violation))
     return np.array([grid[best][0], grid[best][1], levels[best], p[3]])
 
@@ -291,7 +299,9 @@ def _repair(fits, placed, half, missing):
             a = placed[under[0]]
             spot = np.array([2 * p[0] - a[0], 2 * p[1] - a[1], a[2], a[3]])
             options = [n for n in weak if n not in (name, under[0])]
-            if unseen:
+            if not unseen and under[0] in weak:  # a column: the barely seen cube is under it
+                placed[under[0]] = np.array([p[0], p[1], a[2], p[3]])
+            elif unseen:
                 new = unseen.pop(0)
                 weak.add(new)
                 placed[new] = spot
@@ -348,7 +358,8 @@ def perceive(observation, meshes, camera):
             if not keep.all():
                 pts = pts[keep]
                 p, top = _fit(pts, half, eye)
-            p = _free_space(p, pts, half, depth, labels == k, camera, firm)
+            others = [q for n, (q, _, _) in fits.items() if n != name]
+            p = _free_space(p, pts, half, depth, labels == k, camera, firm, others)
             fits[name] = (p, top, pixels)
     missing = [n for n in HUES if n not in fits]
     placed = _settle(fits, list(missing), half)
