@@ -14,7 +14,8 @@ direction), measured from the menagerie 2F-85's collision geometry (see `FingerM
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -144,6 +145,8 @@ class GraspReport:
 
     grasps: tuple[Grasp, ...]
     rejected: dict[str, int] = field(default_factory=dict)
+    blockers: dict[str, int] = field(default_factory=dict)
+    """Neighbour id → how many candidates it blocked (at the pick or the place)."""
 
     def summary(self) -> str:
         if not self.rejected:
@@ -229,19 +232,35 @@ def boxes_hit_triangles(
     v = v[keep]
     e = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)  # (n, 3, 3)
     # Triangle normal.
-    n = np.cross(e[:, 0], e[:, 1])
+    n = _cross(e[:, 0], e[:, 1])
     p = np.einsum("nk,nk->n", n, v[:, 0])
     r = np.abs(n) @ half
     sep = np.abs(p) > r
     # Nine edge × axis cross products.
-    basis = np.eye(3)
+    zero = np.zeros(len(e))
     for i in range(3):
-        for j in range(3):
-            a = np.cross(e[:, i], basis[j])  # (n, 3)
+        ex, ey, ez = e[:, i, 0], e[:, i, 1], e[:, i, 2]
+        for a in (  # e × x, e × y, e × z
+            np.stack([zero, ez, -ey], axis=1),
+            np.stack([-ez, zero, ex], axis=1),
+            np.stack([ey, -ex, zero], axis=1),
+        ):
             proj = np.einsum("nk,nvk->nv", a, v)
             r = np.abs(a) @ half
             sep |= (proj.min(axis=1) > r) | (proj.max(axis=1) < -r)
     return bool((~sep).any())
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (n, 3) arrays (np.cross without its per-call overhead)."""
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )
 
 
 def _world_triangles(mesh: trimesh.Trimesh, pose: np.ndarray) -> np.ndarray:
@@ -264,6 +283,15 @@ class _Triangles:
         return cls(tris, flat.min(axis=0), flat.max(axis=0))
 
 
+@functools.lru_cache(maxsize=4096)
+def _box_arrays(
+    fingers: FingerModel, gap: float, tip: float, margin: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """`fingers.boxes(...)` as arrays: centres (n, 3) and half extents (n, 3), TCP frame."""
+    boxes = fingers.boxes(gap, tip, margin)
+    return np.array([c for c, _ in boxes]), np.array([h for _, h in boxes])
+
+
 def _gripper_hits(
     T_world_tcp: np.ndarray,
     gap: float,
@@ -273,13 +301,13 @@ def _gripper_hits(
     fingers: FingerModel,
 ) -> bool:
     R = T_world_tcp[:3, :3]
-    for centre, half in fingers.boxes(gap, tip, margin):
-        c = R @ centre + T_world_tcp[:3, 3]
-        extent = np.abs(R) @ half  # the box's world AABB half sizes
-        for t in triangle_sets:
-            if np.any(c + extent < t.lo) or np.any(c - extent > t.hi):
-                continue
-            if boxes_hit_triangles(c, half, R, t.tris):
+    centres, halves = _box_arrays(fingers, gap, tip, margin)
+    c = centres @ R.T + T_world_tcp[:3, 3]  # (n, 3) world
+    extent = halves @ np.abs(R).T  # (n, 3) the boxes' world AABB half sizes
+    for t in triangle_sets:
+        near = np.flatnonzero(np.all((c + extent >= t.lo) & (c - extent <= t.hi), axis=1))
+        for b in near:
+            if boxes_hit_triangles(c[b], halves[b], R, t.tris):
                 return True
     return False
 
@@ -460,6 +488,7 @@ def plan_grasps(
     max_width: float = 0.080,
     margins: Sequence[float] = (0.006, 0.002),
     max_symmetries: int = 4,
+    limit: int | None = None,
 ) -> GraspReport:
     """Feasible top-down grasps to move `mesh` from `T_pick` to `T_target`, best first.
 
@@ -474,6 +503,8 @@ def plan_grasps(
         margins: clearances tried against neighbours [m], larger (preferred) first.
         max_symmetries: per face pair and wrist yaw, how many place options (fewest wrist
             rotation first) are checked.
+        limit: stop once this many grasps are found (a feasibility test: the grasps returned
+            are then not necessarily the best). None: all.
     """
     fingers = fingers or FingerModel()
     table = gripper_table()
@@ -481,6 +512,7 @@ def plan_grasps(
     T_target = np.asarray(T_target, dtype=float)
     syms = [np.eye(4)] if symmetries is None or len(symmetries) == 0 else list(symmetries)
     rejected: dict[str, int] = {}
+    blockers: dict[str, int] = {}
 
     # Place options: the symmetric targets reachable by a rotation about the vertical.
     options = []  # (index, T_place, yaw of pick → place)
@@ -515,6 +547,17 @@ def plan_grasps(
         tip_contact = table.tip_at_gap(pair.width)
         tcp_z = pair.tip_z + tip_contact  # the TCP sits above the fingertips
         own_hit: dict[tuple[float, float], bool] = {}
+        pick_hits: dict[tuple[float, float, float], int] = {}
+
+        def pick_hit(
+            flip: float, tcp: np.ndarray, gap: float, reach: float, margin: float, cache=pick_hits
+        ) -> int:
+            # the pick side does not depend on the place option: check it once per opening
+            key = (flip, gap, margin)
+            if key not in cache:
+                cache[key] = _first_hit(tcp, gap, reach, margin, pick_sets, fingers)
+            return cache[key]
+
         for flip in (1.0, -1.0):
             tcp_pick = _tcp_pose(flip * pair.closing, pair.centre[:2], tcp_z)
             T_obj_tcp = T_pick_inv @ tcp_pick
@@ -542,11 +585,10 @@ def plan_grasps(
                         reject("fingertips below the table at the place")
                         break
                     margin, hit = _clear_margin(
-                        tcp_pick,
+                        functools.partial(pick_hit, flip, tcp_pick, open_gap, reach),
                         tcp_place,
                         open_gap,
                         reach,
-                        pick_sets,
                         place_sets,
                         margins,
                         fingers,
@@ -555,6 +597,7 @@ def plan_grasps(
                         where, index = hit
                         who = pick_ids[index] if where == "pick" else place_ids[index]
                         reject(f"fingers hit {who!r} at the {where}")
+                        blockers[who] = blockers.get(who, 0) + 1
                         continue
                     grasps.append(
                         Grasp(
@@ -575,25 +618,31 @@ def plan_grasps(
                         )
                     )
                     break
+                if limit is not None and len(grasps) >= limit:
+                    break
+            if limit is not None and len(grasps) >= limit:
+                break
+        if limit is not None and len(grasps) >= limit:
+            break
     grasps.sort(key=lambda g: -g.score)
-    return GraspReport(grasps=tuple(grasps), rejected=rejected)
+    return GraspReport(grasps=tuple(grasps), rejected=rejected, blockers=blockers)
 
 
 def _clear_margin(
-    tcp_pick: np.ndarray,
+    pick_hit: Callable[[float], int],
     tcp_place: np.ndarray,
     gap: float,
     reach: float,
-    pick_sets: Sequence[_Triangles],
     place_sets: Sequence[_Triangles],
     margins: Sequence[float],
     fingers: FingerModel,
 ) -> tuple[float | None, tuple[str, int]]:
     """The largest margin at which the gripper clears all neighbours at both ends, or None and
-    (where, index) of a neighbour hit at the smallest margin."""
+    (where, index) of a neighbour hit at the smallest margin. `pick_hit(margin)`: the index of
+    the first neighbour hit at the pick, -1 for none."""
     hit = ("pick", -1)
     for margin in margins:
-        index = _first_hit(tcp_pick, gap, reach, margin, pick_sets, fingers)
+        index = pick_hit(margin)
         if index >= 0:
             hit = ("pick", index)
             continue
