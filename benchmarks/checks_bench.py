@@ -3,7 +3,7 @@
 For a domain's hand-written reference programs (`domains/<domain>/programs/`):
 - every correct program is checked `--repeats` times: none may be rejected, and all its
   reports must be identical once timings are left out (no flakiness);
-- every mutant of `benchmarks/mutants/catalogue.toml` (a reference program with a planted bug)
+- every mutant of `benchmarks/mutants/<domain>.toml` (a reference program with a planted bug)
   is checked once: it must be rejected; the table says by which check.
 Targets (issue 6): at least 95 % of mutants rejected, zero rejections of the correct programs.
 
@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
-CATALOGUE = Path(__file__).resolve().parent / "mutants" / "catalogue.toml"
+MUTANTS = Path(__file__).resolve().parent / "mutants"
 CODE_DEPS = {"render": (), "perceive": ("render",), "relate": ("render",), "plan": ("relate",)}
 FUNCTIONS = ("render", "perceive", "relate", "plan")
 TARGET_CAUGHT = 0.95
@@ -51,8 +51,16 @@ def programs(domain: str) -> dict[str, str]:
     return {f: (folder / f"{f}.py").read_text() for f in FUNCTIONS}
 
 
+def catalogue(domain: str) -> Path:
+    """The mutant catalogue of a domain."""
+    return MUTANTS / f"{domain}.toml"
+
+
 def load_mutants(path: Path, references: dict[str, str]) -> list[Mutant]:
     """The catalogue's mutants with their sources (replacements applied and verified)."""
+    if not path.is_file():
+        known = ", ".join(sorted(p.stem for p in MUTANTS.glob("*.toml")))
+        raise CatalogueError(f"no mutant catalogue {path.name}; known: {known}")
     data = tomllib.loads(path.read_text())
     out, names = [], set()
     for m in data["mutant"]:
@@ -111,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
 
     refs = programs(args.domain)
     try:
-        mutants = load_mutants(CATALOGUE, refs)
+        mutants = load_mutants(catalogue(args.domain), refs)
     except CatalogueError as e:
         print(f"broken catalogue: {e}", file=sys.stderr)
         return 2

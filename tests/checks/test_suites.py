@@ -146,11 +146,10 @@ def test_domain_support_reversed(check):
 
 
 def test_domain_temporary_places_touching(check):
-    from benchmarks.checks_bench import CATALOGUE, load_mutants, programs
+    from benchmarks.checks_bench import catalogue, load_mutants, programs
 
-    mutant = next(
-        m for m in load_mutants(CATALOGUE, programs("cubes")) if m.name == "plan_temporary_touching"
-    )
+    mutants = load_mutants(catalogue("cubes"), programs("cubes"))
+    mutant = next(m for m in mutants if m.name == "plan_temporary_touching")
     report = check("plan", mutant.source)
     assert "domain.cubes.temporary_places_clear" in failing(report)
 
