@@ -11,11 +11,13 @@ A domain lives in its own folder beside its module (dm_control style):
     benchmark/       the fixed benchmark set: goalGG_startS.json, 20 goals × 3 starts
 
 Subclasses provide `make_goal` and `make_start`; the base class turns them into instances
-with a construction order, rejecting draws that are not physically valid.
+with a construction order, rejecting draws that are not physically valid or whose order the
+robot cannot execute (a step without a top-down grasp of the 2F-85).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from collections.abc import Mapping, Sequence
@@ -30,6 +32,7 @@ import trimesh
 
 from domains import _meshing, symmetry
 from domains._geometry import ConvexPart, bodies_of, contact_edges
+from domains._grasping import GraspCheck
 from domains._planning import Planner, Region
 from domains.errors import DomainError, GenerationError, UnknownObjectError
 
@@ -322,12 +325,24 @@ class Domain:
 
     @cached_property
     def planner(self) -> Planner:
+        """The geometric construction planner (no grasp checks)."""
         return Planner(
             parts=self.parts,
             symmetries=self._symmetries,
             region=self.placement,
             clearance=self.temp_clearance,
         )
+
+    @cached_property
+    def grasps(self) -> GraspCheck:
+        """The robot's grasp predicate for moves of this domain's objects (needs the robot
+        models: `MENAGERIE_ROOT`)."""
+        return GraspCheck(self._meshes, self._symmetries)
+
+    @cached_property
+    def robot_planner(self) -> Planner:
+        """The construction planner whose orders the robot can execute."""
+        return dataclasses.replace(self.planner, grasps=self.grasps)
 
     def record(self, object_id: str, pose: np.ndarray) -> dict:
         return {
@@ -339,8 +354,14 @@ class Domain:
     def scene(self, records: Sequence[Mapping]) -> dict:
         return {"domain": self.name, "objects": [dict(r) for r in records]}
 
-    def generate(self, seed: int, *, physics: bool = True) -> Instance:
-        """A free draw: goal and start both from `seed`."""
+    def generate(self, seed: int, *, physics: bool = True, grasps: bool | None = None) -> Instance:
+        """A free draw: goal and start both from `seed`.
+
+        Args:
+            physics: reject scenes that do not settle in MuJoCo.
+            grasps: make the order executable by the robot (every step has a grasp);
+                None: as `physics`. Both need MuJoCo; without them only geometry is checked.
+        """
         return self._instance(
             name=f"seed{seed}",
             seed=seed,
@@ -348,10 +369,14 @@ class Domain:
             goal_index=None,
             start_key=(seed, 1),
             physics=physics,
+            grasps=physics if grasps is None else grasps,
         )
 
-    def benchmark_instance(self, goal: int, start: int, *, physics: bool = True) -> Instance:
-        """Benchmark instance `goal` (1–20, 1 = reference) × `start` (1–3), regenerated."""
+    def benchmark_instance(
+        self, goal: int, start: int, *, physics: bool = True, grasps: bool | None = None
+    ) -> Instance:
+        """Benchmark instance `goal` (1–20, 1 = reference) × `start` (1–3), regenerated
+        (`physics`, `grasps`: as for `generate`)."""
         if not (1 <= goal <= BENCHMARK_GOALS and 1 <= start <= BENCHMARK_STARTS):
             raise ValueError(
                 f"benchmark has goals 1–{BENCHMARK_GOALS}, starts 1–{BENCHMARK_STARTS}"
@@ -363,9 +388,13 @@ class Domain:
             goal_index=goal,
             start_key=(10_000, goal, start),
             physics=physics,
+            grasps=physics if grasps is None else grasps,
         )
 
-    def _instance(self, *, name, seed, goal_key, goal_index, start_key, physics) -> Instance:
+    def _instance(
+        self, *, name, seed, goal_key, goal_index, start_key, physics, grasps
+    ) -> Instance:
+        planner = self.robot_planner if grasps else self.planner
         problems: list[str] = []
         for attempt in range(40):
             goal = self.make_goal(np.random.default_rng([*goal_key, attempt]), goal_index)
@@ -383,7 +412,7 @@ class Domain:
                 problems.append(f"start draw {attempt}: {start_problems[0]}")
                 continue
             try:
-                order = self.planner.order(start, goal)
+                order = planner.order(start, goal)
             except GenerationError as e:
                 problems.append(f"start draw {attempt}: {e}")
                 continue

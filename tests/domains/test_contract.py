@@ -2,7 +2,8 @@
 
 Each domain must have consistent files, meshes that are watertight with their convex parts
 and symmetries, cameras that see the workspace, a deterministic generator, and a committed
-benchmark of 60 physically valid instances whose construction orders are executable.
+benchmark of 60 physically valid instances whose construction orders are executable (valid
+at every step, and by the robot: every step has a top-down grasp of the 2F-85).
 """
 
 from __future__ import annotations
@@ -170,6 +171,20 @@ def test_benchmark_is_geometrically_valid_with_executable_orders(domain, benchma
         assert check_order(domain, inst.start, inst.order, inst.goal, physics=False) == [], (
             inst.name
         )
+
+
+def test_benchmark_orders_have_a_grasp_at_every_step(domain, benchmark):
+    # the robot's predicate (sim.grasp.plan_grasps, every other object a neighbour at both
+    # ends), geometry only, no physics
+    for inst in benchmark:
+        bad = domain.grasps.first_infeasible(inst.start["objects"], inst.order)
+        assert bad is None, f"{inst.name}: {bad}"
+
+
+def test_generated_orders_have_a_grasp_at_every_step(domain):
+    inst = domain.generate(11, physics=False, grasps=True)
+    assert domain.grasps.first_infeasible(inst.start["objects"], inst.order) is None
+    assert check_order(domain, inst.start, inst.order, inst.goal, physics=False) == []
 
 
 @pytest.mark.slow

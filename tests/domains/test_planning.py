@@ -1,0 +1,88 @@
+"""Construction orders the robot can execute: the grasp-aware planner (geometry only)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import domains
+from domains._geometry import yaw_pose
+from sim.settle import check_order
+
+# The cubes reference pyramid (goal 1) from a start where the geometric planner parks cyan
+# 12 mm from the pyramid's base: the fingers then cannot reach between it and the base, and
+# cannot pick cyan again once the second level stands beside it.
+PYRAMID = (
+    ("red", -0.046, 0.0),
+    ("green", 0.0, 0.0),
+    ("blue", 0.046, 0.0),
+    ("yellow", -0.023, 1.0),
+    ("purple", 0.023, 1.0),
+    ("cyan", 0.0, 2.0),
+)
+START = (
+    ("cyan", 0.4946, 0.0073, -138.3),
+    ("yellow", 0.5057, -0.1531, 79.4),
+    ("purple", 0.3577, 0.1711, 62.0),
+    ("red", 0.4514, 0.2072, 164.4),
+    ("blue", 0.4248, 0.0935, -70.5),
+    ("green", 0.5913, -0.0678, -129.5),
+)
+
+
+def _records(placed):
+    return [{"id": i, "mesh": "cube", "pose": p} for i, p in placed]
+
+
+@pytest.fixture(scope="module")
+def cubes():
+    return domains.load("cubes")
+
+
+@pytest.fixture(scope="module")
+def pyramid_instance():
+    goal = _records(
+        (i, yaw_pose(0.5, y, 0.02 + 0.04 * level, np.pi / 2)) for i, y, level in PYRAMID
+    )
+    start = _records((i, yaw_pose(x, y, 0.02, np.radians(a))) for i, x, y, a in START)
+    return start, goal
+
+
+def test_a_geometric_order_can_be_unexecutable(cubes, pyramid_instance):
+    start, goal = pyramid_instance
+    steps = cubes.planner.order(start, goal)
+    bad = cubes.grasps.first_infeasible(start, steps)
+    assert bad is not None
+    assert "fingers hit" in bad.verdict.reason and bad.verdict.blockers
+
+
+def test_the_robot_planner_finds_an_executable_order(cubes, pyramid_instance):
+    start, goal = pyramid_instance
+    steps = cubes.robot_planner.order(start, goal)
+    assert cubes.grasps.first_infeasible(start, steps) is None
+    scene = lambda records: {"domain": "cubes", "objects": records}  # noqa: E731
+    assert check_order(cubes, scene(start), steps, scene(goal), physics=False) == []
+
+
+def test_an_executable_geometric_order_is_kept(cubes):
+    inst = cubes.generate(3, physics=False, grasps=False)
+    steps = cubes.planner.order(inst.start["objects"], inst.goal["objects"])
+    assert cubes.grasps.first_infeasible(inst.start["objects"], steps) is None  # premise
+    robot = cubes.robot_planner.order(inst.start["objects"], inst.goal["objects"])
+    assert [s["object"] for s in robot] == [s["object"] for s in steps]
+    assert all(
+        np.allclose(a["target_pose"], b["target_pose"]) for a, b in zip(robot, steps, strict=True)
+    )
+
+
+def test_grasp_verdicts_name_the_blocking_neighbour(cubes):
+    cube = yaw_pose(0.5, 0.0, 0.02, 0.0)
+    # neighbours 10 mm away on all four sides: no room for a finger anywhere
+    others = {
+        n: ("cube", yaw_pose(0.5 + dx, dy, 0.02, 0.0))
+        for n, dx, dy in (("a", 0.05, 0), ("b", -0.05, 0), ("c", 0, 0.05), ("d", 0, -0.05))
+    }
+    verdict = cubes.grasps.pickable("x", "cube", cube, others)
+    assert not verdict.ok and verdict.blockers and set(verdict.blockers) <= set(others)
+    del others["a"], others["b"]  # the x axis is free again
+    assert cubes.grasps.pickable("x", "cube", cube, others).ok
