@@ -23,14 +23,16 @@ knob's two axes.
 4. Order. Greedy, one transfer per step: among the pieces whose target is free (no other
    piece on it) and whose knob the fingers can take at the pick and at the place along the
    same knob axis (no other knob in the fingers' way), place first the one that keeps every
-   other unplaced piece grippable at its goal afterwards, then the most constrained (fewest
-   free knob axes at its goal). The goal state's `blocks` edges (from `relate`) say which
-   placed piece takes away which knob axis; the same test is made from geometry on the
-   spread targets, so a graph without `blocks` edges (or a noisy one) still works: edges
-   only add to the ordering constraints. When nothing can be placed, a piece lying on a
-   pending goal (a start piece in the figure, or a cycle of pieces swapping places) goes to a
-   temporary place first: on the table inside the robot's comfortable reach, 25 mm clear of
-   every piece (room for the fingers) and 12 mm clear of every unbuilt goal.
+   other unplaced piece grippable at its goal afterwards, then the one that would lose a
+   knob axis to a neighbour placed later: while both axes are open the gripper has twice the
+   grasps, and so more wrist angles the arm can reach. The goal state's `blocks` edges (from
+   `relate`) say which placed piece takes away which knob axis; the same test is made from
+   geometry on the spread targets, so a graph without `blocks` edges (or a noisy one) still
+   works: edges only add to the ordering constraints. When nothing can be placed, a piece
+   lying on a pending goal (a start piece in the figure, or a cycle of pieces swapping
+   places) goes to a temporary place first: on the table inside the robot's comfortable
+   reach, 25 mm clear of every piece (room for the fingers) and 12 mm clear of every unbuilt
+   goal.
 """
 
 import numpy as np
@@ -306,14 +308,18 @@ def plan(start_state, goal_state):
 
 
 def _priority(i, blockers, placed, pending):
-    """Sort key of a placeable piece: does placing it strand another piece, how constrained is
-    it, then its id."""
+    """Sort key of a placeable piece: does placing it strand another piece; how many of its
+    knob axes, free now, would a later placement take away (place it while the gripper still
+    has both ways to hold it: more grasps, more wrist angles the arm can reach); its id."""
     after = placed | {i}
     stranded = sum(
         1 for j in pending if j != i and all(blockers[j][axis] & after for axis in (0, 1))
     )
-    free_now = sum(1 for axis in (0, 1) if not blockers[i][axis] & placed)
-    return (stranded, free_now, i)
+    later = set(pending) - {i}
+    losing = sum(
+        1 for axis in (0, 1) if not blockers[i][axis] & placed and blockers[i][axis] & later
+    )
+    return (stranded, -losing, i)
 
 
 def _in_the_way(pending, target, current, placed):
