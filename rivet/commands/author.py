@@ -197,6 +197,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="where drafts run (local isolates nothing)",
     )
     p.add_argument("--thorough", action="store_true", help="more property-test examples per check")
+    p.add_argument(
+        "--ray",
+        default=None,
+        metavar="ADDRESS",
+        help="with --runs N: one Ray task per run ('local' starts Ray here)",
+    )
     p.add_argument("--runs-dir", default=str(RUNS), help="where run journals go (default runs/)")
     p.add_argument(
         "--artifacts", default=None, help="artifact root (default: the repository's artifacts/)"
