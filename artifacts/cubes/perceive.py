@@ -30,7 +30,7 @@ HUE_TOL = 20.0  # [deg]
 SAT_MIN = 0.35
 VAL_MIN = 0.10
 MIN_PIXELS = 10
-WEAK_PIXELS = 600  # a cube seen by fewer pixels is placed by physics when needed
+WEAK_PIXELS = 1500  # a cube seen by fewer pixels is placed by physics when needed
 REFINE_PIXELS = 1500  # a cube seen by fewer pixels is placed using free space as well
 EXPLAINED = 0.003  # a point this close to another cube's surface belongs to that cube [m]
 MAX_POINTS = 500  # per cube, for speed
@@ -167,21 +167,34 @@ def _face_samples(half, n=6):
     return np.concatenate(pts), np.concatenate(normals)
 
 
-def _free_space(p, pts, half, depth, own, camera, firm):
+def _free_space(p, pts, half, depth, own, camera, firm, others):
     """Slide a barely seen cube to where it explains its points without hiding what the camera
-    sees behind it (its visible faces must not lie in front of farther observed surfaces) and
-    without overlapping the well-seen cubes `firm` at its level."""
+    sees behind it (its visible faces must not lie in front of farther observed surfaces).
+
+    Each candidate place rests on the table or on the `others` under it, so a sliver of a
+    cube on top of a stack is put on the stack, not in it; it may not overlap a well-seen
+    cube (`firm`) at its own level.
+    """
     K = np.asarray(camera["K"], dtype=float)
     T = np.asarray(camera["T_world_camera"], dtype=float)
     R_cw, t_cw = T[:3, :3].T, -T[:3, :3].T @ T[:3, 3]
-    level = half + 2 * half * round((p[2] - half) / (2 * half))
     samples, normals = _face_samples(half)
     c, s = np.cos(p[3]), np.sin(p[3])
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     local_pts, world_n = samples @ Rz.T, normals @ Rz.T
     offsets = np.arange(-0.035, 0.03501, 0.0025)
     grid = np.array([(p[0] + dx, p[1] + dy) for dx in offsets for dy in offsets])  # (g, 2)
-    centres = np.c_[grid, np.full(len(grid), level)]  # (g, 3)
+    # at least the level its points show: what holds it up may be hidden
+    levels = np.full(len(grid), half + 2 * half * max(0, round((p[2] - half) / (2 * half))))
+    top = float(np.percentile(pts[:, 2], 98))
+    for q in sorted(others, key=lambda q: q[2]):
+        if q[2] + half > top - 0.005:
+            continue  # not below what is seen of this cube: it cannot hold it up
+        near = np.linalg.norm(grid - q[:2], axis=1) < 4 * half
+        for g in np.nonzero(near)[0]:
+            if _overlap(np.array([*grid[g], levels[g], p[3]]), q, half):
+                levels[g] = max(levels[g], q[2] + 2 * half)
+    centres = np.c_[grid, levels]  # (g, 3)
     world = centres[:, None, :] + local_pts[None]  # (g, k, 3)
     eye = T[:3, 3]
     visible = np.einsum("gkj,kj->gk", eye - world, world_n) > 0
@@ -198,13 +211,16 @@ def _free_space(p, pts, half, depth, own, camera, firm):
     violation = seen_through.sum(axis=1) / np.maximum(inside.sum(axis=1), 1)
     cost = np.empty(len(grid))
     for g, (x, y) in enumerate(grid):
-        r = np.abs(_residuals((x, y, level, p[3]), pts, half))
+        r = np.abs(_residuals((x, y, levels[g], p[3]), pts, half))
         cost[g] = np.mean(np.minimum(r, 0.005))
     for q in firm:
-        if abs(q[2] - level) < half:
-            cost += [0.01 * _overlap(np.array([x, y, level, p[3]]), q, half) for x, y in grid]
+        for g in np.nonzero(np.linalg.norm(grid - q[:2], axis=1) < 4 * half)[0]:
+            if abs(q[2] - levels[g]) < half and _overlap(
+                np.array([*grid[g], levels[g], p[3]]), q, half
+            ):
+                cost[g] += 0.01
     best = int(np.argmin(cost + 0.004 * violation))
-    return np.array([grid[best][0], grid[best][1], level, p[3]])
+    return np.array([grid[best][0], grid[best][1], levels[best], p[3]])
 
 
 def _overlap(a, b, half):
@@ -248,34 +264,56 @@ def _over(p, q, half):
 
 
 def _repair(fits, placed, half, missing):
-    """Move a barely seen cube under a cube that would otherwise tip over.
+    """Put barely seen or unseen cubes where the cubes above them need them.
 
-    A cube resting off-centre on a single cube (a pyramid's upper level) needs a second
-    supporter mirrored about its centre; when that one is hardly visible its own fit is
-    unreliable, so it is put where the cube above needs it.
+    In a pyramid an upper cube rests centred between two cubes. When it would rest on a
+    single cube, off-centre, the second supporter is hidden: an unseen cube (or the barely
+    seen one nearest) goes to the mirror image of the first about the upper cube's centre.
+    When a barely seen cube is one of two supporters, it is centred the same way.
     """
     weak = {n for n, (_, _, pixels) in fits.items() if pixels < WEAK_PIXELS}
     weak |= set(placed) - set(fits)
     unseen = [n for n in missing if n not in placed]
-    for name in sorted(placed, key=lambda n: (placed[n][2], n)):
-        p = placed[name]
-        if p[2] < 2 * half:
-            continue
-        under = [
-            n
-            for n, q in placed.items()
-            if n != name and abs(p[2] - q[2] - 2 * half) < 1e-6 and _overlap(p, q, half)
-        ]
-        if len(under) != 1 or _over(p, placed[under[0]], half):
-            continue
-        a = placed[under[0]]
-        spot = np.array([2 * p[0] - a[0], 2 * p[1] - a[1], a[2], a[3]])
-        options = [n for n in weak if n not in (name, under[0])]
-        if unseen:
-            placed[unseen.pop(0)] = spot
-        elif options:
-            x = min(options, key=lambda n: (np.linalg.norm(placed[n][:2] - spot[:2]), n))
-            placed[x] = spot
+    for _ in range(len(placed) + len(unseen)):
+        changed = False
+        for name in sorted(placed, key=lambda n: (placed[n][2], n)):
+            p = placed[name]
+            if p[2] < 2 * half:
+                continue
+            under = [
+                n
+                for n, q in placed.items()
+                if n != name and abs(p[2] - q[2] - 2 * half) < 1e-6 and _overlap(p, q, half)
+            ]
+            if len(under) == 2 and sum(n in weak for n in under) == 1:
+                b, a = sorted(under, key=lambda n: n not in weak)  # b: the weak one
+                spot = np.array(
+                    [2 * p[0] - placed[a][0], 2 * p[1] - placed[a][1], placed[b][2], placed[a][3]]
+                )
+                if 1e-4 < np.linalg.norm(spot[:2] - placed[b][:2]) < 0.015:
+                    placed[b] = spot
+                    changed = True
+                continue
+            if len(under) != 1 or _over(p, placed[under[0]], half):
+                continue
+            a = placed[under[0]]
+            spot = np.array([2 * p[0] - a[0], 2 * p[1] - a[1], a[2], a[3]])
+            options = [n for n in weak if n not in (name, under[0])]
+            if not unseen and under[0] in weak:  # a column: the barely seen cube is under it
+                placed[under[0]] = np.array([p[0], p[1], a[2], p[3]])
+            elif unseen:
+                new = unseen.pop(0)
+                weak.add(new)
+                placed[new] = spot
+            elif options:
+                x = min(options, key=lambda n: (np.linalg.norm(placed[n][:2] - spot[:2]), n))
+                placed[x] = spot
+            else:
+                continue
+            changed = True
+            break  # the supports changed: look again from the bottom
+        if not changed:
+            break
     return placed
 
 
@@ -299,11 +337,17 @@ def perceive(observation, meshes, camera):
         if len(pts) >= MIN_PIXELS:
             p, top = _fit(pts, half, eye)
             fits[name] = (p, top, int(raw.sum()))
-            clouds[name] = (pts, k)
+            # a cube cut by the image border is as uncertain as a barely seen one
+            cut = raw[:2].any() or raw[-2:].any() or raw[:, :2].any() or raw[:, -2:].any()
+            clouds[name] = (pts, k, cut)
     for name, (p, top, pixels) in list(fits.items()):
-        if pixels < REFINE_PIXELS:
-            firm = [q for n, (q, _, px) in fits.items() if n != name and px >= REFINE_PIXELS]
-            pts, k = clouds[name]
+        pts, k, cut = clouds[name]
+        if pixels < REFINE_PIXELS or cut:
+            firm = [
+                q
+                for n, (q, _, px) in fits.items()
+                if n != name and px >= REFINE_PIXELS and not clouds[n][2]
+            ]
             # points on another cube's surface are colour blends at its edges, not evidence
             keep = np.ones(len(pts), bool)
             for q in firm:
@@ -314,7 +358,8 @@ def perceive(observation, meshes, camera):
             if not keep.all():
                 pts = pts[keep]
                 p, top = _fit(pts, half, eye)
-            p = _free_space(p, pts, half, depth, labels == k, camera, firm)
+            others = [q for n, (q, _, _) in fits.items() if n != name]
+            p = _free_space(p, pts, half, depth, labels == k, camera, firm, others)
             fits[name] = (p, top, pixels)
     missing = [n for n in HUES if n not in fits]
     placed = _settle(fits, list(missing), half)

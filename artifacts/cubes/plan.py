@@ -19,6 +19,10 @@ HALF = SIDE / 2
 ON_GAP = 0.008  # vertical gap still read as resting on [m]
 SAME = 0.004  # a cube this close to its goal position counts as placed [m]
 SAME_YAW = np.radians(4.0)  # … and this close in yaw, modulo 90°
+# where objects may be at all: the robot's workspace [m]
+WORKSPACE_X = (0.25, 0.75)
+WORKSPACE_Y = (-0.35, 0.35)
+WORKSPACE_REACH = 0.78
 # where temporary places may go (the robot's comfortable reach in front of it) [m]
 REGION_X = (0.33, 0.67)
 REGION_Y = (-0.26, 0.26)
@@ -92,6 +96,16 @@ def _in_region(xy):
         REGION_X[0] <= x <= REGION_X[1]
         and REGION_Y[0] <= y <= REGION_Y[1]
         and np.hypot(x, y) <= REACH
+    )
+
+
+def _reachable(xy):
+    """Inside the robot's workspace (where goals may be; 5 mm of slack for perception)."""
+    x, y = xy
+    return (
+        WORKSPACE_X[0] - 0.005 <= x <= WORKSPACE_X[1] + 0.005
+        and WORKSPACE_Y[0] - 0.005 <= y <= WORKSPACE_Y[1] + 0.005
+        and np.hypot(x, y) <= WORKSPACE_REACH + 0.005
     )
 
 
@@ -171,7 +185,7 @@ def plan(start_state, goal_state):
     if goal is None:
         return {"status": "infeasible", "reason": why}
     for i, p in goal.items():
-        if not all(_in_region(c) or np.hypot(*c) <= REACH + 0.05 for c in _corners(p)):
+        if not all(_reachable(c) for c in _corners(p)):
             return {"status": "infeasible", "reason": f"'{i}' is out of reach in the goal"}
     goal_sup = _supporters(goal)
     current = dict(start)
