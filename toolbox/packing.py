@@ -79,13 +79,13 @@ def spread_footprints(
 ) -> np.ndarray:
     """Translations (N, 2) [m] that open tight gaps in a packed layout, moving parts little.
 
-    Every pair closer than `near` is pushed towards at least `gap` apart (overlaps resolved
-    first) while no part moves more than `max_shift` and the parts listed in `fixed` do not
-    move. When `gap` cannot be reached everywhere, the smallest gap is made as large as
-    possible, then the total movement as small as possible (two linear programmes over the
-    pairs' separating axes, which keep their gaps a lower bound). Use it to turn a perceived
-    figure whose parts touch into placement targets a gripper with ~1 mm error can hit; a
-    final check of the result with `polygon_gap` is cheap.
+    Every pair closer than `near` is pushed towards `gap` apart (overlaps resolved first)
+    while no part moves more than `max_shift` and the parts listed in `fixed` do not move.
+    Two linear programmes over the pairs' separating axes (which keep each gap a lower
+    bound): the smallest gap is made as large as possible, then every other gap as close to
+    `gap` as the shift budget allows, with as little movement as possible. Use it to turn a
+    perceived figure whose parts touch into placement targets a gripper with ~1 mm error can
+    hit; a final check of the result with `polygon_gap` is cheap.
     """
     polys = [_poly(p, f"footprints[{i}]") for i, p in enumerate(footprints)]
     n = len(polys)
@@ -100,17 +100,23 @@ def spread_footprints(
                 pairs.append((i, j, g, axis))
     if not pairs:
         return out
-    # variables: t (2n), |t| bounds u (2n), smallest gap s
-    nv = 4 * n + 1
+    # variables: t (2n), |t| bounds u (2n), smallest gap s, each pair's gap e (capped at gap)
+    m = len(pairs)
     s = 4 * n
+    e0 = s + 1
+    nv = e0 + m
     A, b = [], []
-    for i, j, g, axis in pairs:  # g + axis·(t_i − t_j) >= min(s, gap)
+    for k, (i, j, g, axis) in enumerate(pairs):  # e_k <= g + axis·(t_i − t_j), s <= e_k
         row = np.zeros(nv)
         row[2 * i : 2 * i + 2] -= axis
         row[2 * j : 2 * j + 2] += axis
-        row[s] = 1.0
+        row[e0 + k] = 1.0
         A.append(row)
         b.append(g)
+        row = np.zeros(nv)
+        row[s], row[e0 + k] = 1.0, -1.0
+        A.append(row)
+        b.append(0.0)
     for k in range(2 * n):  # −u <= t <= u
         for sign in (1.0, -1.0):
             row = np.zeros(nv)
@@ -131,15 +137,18 @@ def spread_footprints(
     bounds += [(0.0, None)] * (2 * n)
     lowest = min(p[2] for p in pairs)
     bounds.append((min(lowest, gap), gap))
+    bounds += [(None, gap)] * m
+    A_ub, b_ub = np.array(A), np.array(b)
     c = np.zeros(nv)
     c[s] = -1.0
-    first = linprog(c, A_ub=np.array(A), b_ub=np.array(b), bounds=bounds, method="highs")
+    first = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
     if first.status != 0:
         return out
     bounds[s] = (first.x[s] - 1e-7, gap)
     c = np.zeros(nv)
-    c[2 * n : 4 * n] = 1.0
-    second = linprog(c, A_ub=np.array(A), b_ub=np.array(b), bounds=bounds, method="highs")
+    c[e0:] = -1.0
+    c[2 * n : 4 * n] = 1e-3  # movement matters only between equally good spreads
+    second = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
     x = second.x if second.status == 0 else first.x
     return x[: 2 * n].reshape(n, 2)
 

@@ -109,3 +109,12 @@ def test_finger_footprints_of_a_2f85_on_a_knob():
     )
     with pytest.raises(ToolboxError):
         finger_footprints((0, 0), (0, 0), 0.02)
+
+
+def test_one_tight_pair_does_not_hold_back_the_others():
+    # b is wedged between the fixed a and c (0.2 mm each side); d, touching c on its other
+    # side, still gets its full gap
+    a, b, c, d = (moved(SQUARE, 0.0402 * k) for k in range(4))
+    t = spread_footprints([a, b, c, d], gap=0.002, max_shift=0.003, fixed=[0, 2])
+    assert polygon_gap(b + t[1], a)[0] == pytest.approx(0.0002, abs=1e-6)
+    assert polygon_gap(d + t[3], c)[0] >= 0.002 - 1e-6
