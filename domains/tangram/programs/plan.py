@@ -25,7 +25,8 @@ knob's two axes.
    same knob axis (no other knob in the fingers' way), place first the one that keeps every
    other unplaced piece grippable at its goal afterwards, then the one that would lose a
    knob axis to a neighbour placed later: while both axes are open the gripper has twice the
-   grasps, and so more wrist angles the arm can reach. The goal state's `blocks` edges (from
+   grasps, and so more wrist angles the arm can reach (this counts most for pieces without
+   symmetry and with a large turn from pick to place). The goal state's `blocks` edges (from
    `relate`) say which placed piece takes away which knob axis; the same test is made from
    geometry on the spread targets, so a graph without `blocks` edges (or a noisy one) still
    works: edges only add to the ordering constraints. When nothing can be placed, a piece
@@ -289,7 +290,11 @@ def plan(start_state, goal_state):
                 continue
             ready.append((i, t))
         if ready:
-            i, t = min(ready, key=lambda it: _priority(it[0], blockers, placed, pending))
+            need = {
+                j: 2.0 / SYMMETRY[goal[j].key] + abs(t.yaw - current[j].yaw) / np.pi
+                for j, t in ready
+            }
+            i, t = min(ready, key=lambda it: _priority(it[0], blockers, placed, pending, need))
             current[i] = t
             placed.add(i)
             pending.remove(i)
@@ -307,10 +312,11 @@ def plan(start_state, goal_state):
     return {"status": "infeasible", "reason": f"no plan within {len(steps)} moves"}
 
 
-def _priority(i, blockers, placed, pending):
-    """Sort key of a placeable piece: does placing it strand another piece; how many of its
-    knob axes, free now, would a later placement take away (place it while the gripper still
-    has both ways to hold it: more grasps, more wrist angles the arm can reach); its id."""
+def _priority(i, blockers, placed, pending, need):
+    """Sort key of a placeable piece: does placing it strand another piece; how much it would
+    lose by waiting — knob axes, free now, that a later placement takes away, weighted by
+    `need` (pieces with less symmetry and a larger turn from pick to place have fewer wrist
+    angles to spare); its id."""
     after = placed | {i}
     stranded = sum(
         1 for j in pending if j != i and all(blockers[j][axis] & after for axis in (0, 1))
@@ -319,7 +325,7 @@ def _priority(i, blockers, placed, pending):
     losing = sum(
         1 for axis in (0, 1) if not blockers[i][axis] & placed and blockers[i][axis] & later
     )
-    return (stranded, -losing, i)
+    return (stranded, -losing * need[i], i)
 
 
 def _in_the_way(pending, target, current, placed):
