@@ -102,6 +102,28 @@ def _distinct(d: np.ndarray, *, signed: bool) -> np.ndarray:
     return d[np.sort(idx)]
 
 
+class _Posed(list):
+    """A shape's pieces at one pose; hashed by identity, so pair results can be cached for as
+    long as the shape's pose cache keeps it (the same shape and pose give the same object)."""
+
+    __hash__ = object.__hash__  # type: ignore[assignment]
+
+    def __eq__(self, other: object) -> bool:
+        return self is other
+
+
+_PAIRS: dict[tuple, tuple] = {}  # (posed a, posed b, tolerance) → (gap, axis) or patch
+
+
+def _cached(key: tuple, compute):
+    got = _PAIRS.get(key)
+    if got is None:
+        if len(_PAIRS) >= 50000:
+            _PAIRS.clear()
+        got = _PAIRS[key] = compute()
+    return got
+
+
 class Shape:
     """A rigid object as convex pieces in its own frame [m].
 
@@ -123,6 +145,17 @@ class Shape:
             axis=0
         ) / max(self.volume, 1e-18)
         self.exact = exact
+        self._cache: dict[bytes, _Posed] = {}
+
+    def _posed(self, T: np.ndarray) -> _Posed:
+        """The pieces in the world at pose T, cached: planners ask about the same poses often."""
+        key = T.tobytes()
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) >= 4096:
+                self._cache.clear()
+            got = self._cache[key] = _Posed(p.posed(T) for p in self._pieces)
+        return got
 
     @staticmethod
     def from_pieces(pieces: Sequence[np.ndarray]) -> Shape:
@@ -290,7 +323,7 @@ def _inside_margin(poly_pts: np.ndarray, p: np.ndarray) -> float:
 # -- separation, collisions, support -------------------------------------------------------
 
 
-def _posed(records: Sequence[Mapping], shapes: Mapping[str, Shape]) -> list[tuple[str, list]]:
+def _posed(records: Sequence[Mapping], shapes: Mapping[str, Shape]) -> list[tuple[str, _Posed]]:
     out = []
     for i, r in enumerate(records):
         key = r.get("mesh") if isinstance(r, Mapping) else None
@@ -300,7 +333,7 @@ def _posed(records: Sequence[Mapping], shapes: Mapping[str, Shape]) -> list[tupl
         T = np.asarray(r.get("pose"), dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ToolboxError(f"records[{i}].pose must be a finite (4, 4) matrix")
-        out.append((str(r.get("id", i)), [p.posed(T) for p in shapes[str(key)]._pieces]))
+        out.append((str(r.get("id", i)), shapes[str(key)]._posed(T)))
     return out
 
 
@@ -341,8 +374,8 @@ def separation(
     hangs under) the other; a horizontal axis means a side contact. Pairs of pieces farther
     apart than `cutoff` [m] are skipped (the gap is then inf).
     """
-    A = [p.posed(np.asarray(pose_a, float)) for p in shape_a._pieces]
-    B = [p.posed(np.asarray(pose_b, float)) for p in shape_b._pieces]
+    A = shape_a._posed(np.asarray(pose_a, float))
+    B = shape_b._posed(np.asarray(pose_b, float))
     return _body_gap(A, B, cutoff)
 
 
@@ -374,14 +407,15 @@ def _box(B: list) -> tuple[np.ndarray, np.ndarray]:
 
 def _pairs(bodies, cutoff: float) -> dict[tuple[int, int], tuple[float, np.ndarray]]:
     """Gap and axis (j → i) of every pair i < j whose bounding boxes are within `cutoff`."""
-    boxes = [_box(B) for _, B in bodies]
+    boxes = [_cached((B, "box"), lambda B=B: _box(B)) for _, B in bodies]
     out = {}
     for i in range(len(bodies)):
         for j in range(i + 1, len(bodies)):
             (la, ha), (lb, hb) = boxes[i], boxes[j]
             if np.any(la > hb + cutoff) or np.any(lb > ha + cutoff):
                 continue
-            g, n = _body_gap(bodies[i][1], bodies[j][1], cutoff)
+            A, B = bodies[i][1], bodies[j][1]
+            g, n = _cached((A, B, "gap", cutoff), lambda A=A, B=B: _body_gap(A, B, cutoff))
             if g <= cutoff:
                 out[i, j] = (g, n)
     return out
@@ -399,7 +433,8 @@ def _contacts(bodies, contact_tol: float) -> dict[int, list[tuple[int, np.ndarra
         if abs(n[2]) < VERTICAL:
             continue
         upper, lower = (i, j) if n[2] > 0 else (j, i)
-        patch = _patch(bodies[upper][1], bodies[lower][1], contact_tol)
+        A, B = bodies[upper][1], bodies[lower][1]
+        patch = _cached((A, B, "patch", contact_tol), lambda A=A, B=B: _patch(A, B, contact_tol))
         if len(patch):
             out[upper].append((lower, patch))
     for i in out:

@@ -136,14 +136,34 @@ def _symmetries(mesh, yaw_free=0.0):
     return out
 
 
+_GEOMETRY = {}  # (mesh, pose bytes) → (world points, outline from above, lower/upper corner)
+
+
+def _geometry(mesh, T):
+    key = (mesh, np.asarray(T, dtype=float).tobytes())
+    got = _GEOMETRY.get(key)
+    if got is None:
+        if len(_GEOMETRY) > 20000:
+            _GEOMETRY.clear()
+        pts = np.concatenate(SHAPES[mesh].pieces) @ T[:3, :3].T + T[:3, 3]
+        hull = pts[ConvexHull(pts[:, :2]).vertices, :2]
+        got = _GEOMETRY[key] = (pts, hull, pts.min(axis=0), pts.max(axis=0))
+    return got
+
+
 def _lowest(mesh, T):
-    pts = np.concatenate(SHAPES[mesh].pieces)
-    return float((pts @ T[:3, :3].T + T[:3, 3])[:, 2].min())
+    return float(_geometry(mesh, T)[2][2])
 
 
 def _footprint(mesh, T):
-    pts = np.concatenate(SHAPES[mesh].pieces)
-    return (pts @ T[:3, :3].T + T[:3, 3])[:, :2]
+    """The outline (k, 2) of a posed part seen from above (convex)."""
+    return _geometry(mesh, T)[1]
+
+
+def _box_gap(a, b):
+    """Gap [m] between two parts' axis-aligned boxes (a lower bound of their distance)."""
+    (_, _, lo_a, hi_a), (_, _, lo_b, hi_b) = a, b
+    return float(np.max(np.maximum(lo_a - hi_b, lo_b - hi_a)))
 
 
 def _in_region(xy, x, y, reach):
@@ -268,8 +288,11 @@ class _World:
 
     def hits(self, i, T, tolerance=TOUCH, clearance=0.0, skip=()):
         """Whether part i at pose T comes closer than `clearance` to another part."""
+        box = _geometry(self.mesh[i], T)
         for j, U in self.poses.items():
-            if j == i or j in skip or np.any(np.abs(U[:3, 3] - T[:3, 3]) > 0.3):
+            if j == i or j in skip:
+                continue
+            if _box_gap(box, _geometry(self.mesh[j], U)) > max(clearance, 0.0) + 0.001:
                 continue
             gap, _ = separation(
                 SHAPES[self.mesh[i]], T, SHAPES[self.mesh[j]], U, cutoff=clearance + 0.001
@@ -298,10 +321,12 @@ def _hangs_over(world, i):
 
 
 def _outline_gap(a, b):
-    """Gap [m] between the convex outlines of two 2D point sets (negative: overlap depth)."""
+    """Gap [m] between two convex outlines (k, 2) in order (negative: overlap depth)."""
+    lo = np.maximum(a.min(axis=0) - b.max(axis=0), b.min(axis=0) - a.max(axis=0)).max()
+    if lo > 0.05:
+        return float(lo)
     best = -np.inf
-    for pts in (a, b):
-        h = pts[ConvexHull(pts).vertices]
+    for h in (a, b):
         e = np.roll(h, -1, axis=0) - h
         n = np.stack([e[:, 1], -e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None]
         pa, pb = a @ n.T, b @ n.T
@@ -326,28 +351,53 @@ def _top_of(world, j):
     return j
 
 
+def _gaps(hull, others, shifts):
+    """Outline gaps [m] (n, m) between `hull` moved by each of `shifts` (n, 2) and each of the
+    convex outlines `others` (separating axes of both polygons, all shifts at once)."""
+    out = np.full((len(shifts), len(others)), np.inf)
+    for m, h in enumerate(others):
+        axes = []
+        for poly in (hull, h):
+            e = np.roll(poly, -1, axis=0) - poly
+            axes.append(np.stack([e[:, 1], -e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None])
+        n = np.concatenate(axes)  # (k, 2)
+        pa, pb = hull @ n.T, h @ n.T
+        d = shifts @ n.T  # (s, k)
+        gap = np.maximum(pa.min(0) + d - pb.max(0), pb.min(0) - pa.max(0) - d)
+        out[:, m] = gap.max(axis=1)
+    return out
+
+
 def _temporary(world, i, pending):
-    """A free place on the table for part i (same orientation), nearest to where it is."""
+    """A free place on the table for part i (same orientation), nearest to where it is, with
+    room for the fingers around it seen from above (nothing overhangs it either)."""
     mesh = world.mesh[i]
     T0 = world.poses[i].copy()
     T0[2, 3] -= _lowest(mesh, T0)
+    hull = _footprint(mesh, T0)
     xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
     ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - T0[:2, 3], axis=1), kind="stable")
+    cand = cand[order]
+    shifts = cand - T0[:2, 3]
+    corners = hull[None, :, :] + shifts[:, None, :]  # the region is convex: corners suffice
+    inside = (
+        (corners[..., 0] >= REGION_X[0]).all(axis=1)
+        & (corners[..., 0] <= REGION_X[1]).all(axis=1)
+        & (corners[..., 1] >= REGION_Y[0]).all(axis=1)
+        & (corners[..., 1] <= REGION_Y[1]).all(axis=1)
+        & (np.linalg.norm(corners, axis=2) <= REACH).all(axis=1)
+    )
+    others = [_footprint(world.mesh[j], U) for j, U in sorted(world.poses.items()) if j != i]
+    to_parts = _gaps(hull, others, shifts).min(axis=1, initial=np.inf)
+    goals = [_footprint(world.mesh[j], G) for j, G in pending]
+    to_goals = _gaps(hull, goals, shifts).min(axis=1, initial=np.inf)
     for clearance, goal_clearance in CLEARANCES:
-        for k in order:
+        ok = inside & (to_parts >= clearance) & (to_goals >= goal_clearance)
+        if ok.any():
             T = T0.copy()
-            T[:2, 3] = cand[k]
-            if not _in_region(_footprint(mesh, T), REGION_X, REGION_Y, REACH):
-                continue
-            if world.hits(i, T, clearance=clearance):
-                continue
-            if goal_clearance > 0 and any(
-                _outline_gap(_footprint(mesh, T), _footprint(world.mesh[j], G)) < goal_clearance
-                for j, G in pending
-            ):
-                continue  # it would be in the way of (or under) a part still to be built
+            T[:2, 3] = cand[int(np.argmax(ok))]
             return T
     return None
 
