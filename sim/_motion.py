@@ -34,16 +34,33 @@ def interpolate_poses(T0: np.ndarray, T1: np.ndarray, s: np.ndarray) -> np.ndarr
     return out
 
 
+def turn_poses(T0: np.ndarray, T1: np.ndarray, s: np.ndarray, turn: float) -> np.ndarray:
+    """Poses (n, 4, 4) from T0 to T1 at fractions `s` (n,): linear position, the orientation
+    turned about the world vertical by `s * turn` [rad], which may exceed half a turn (the long
+    way round, where the geodesic would run the wrist into its limit); whatever rotation from
+    T0 to T1 that turn leaves over (a small tilt) is interpolated along the way."""
+    turned = Rotation.from_rotvec([0.0, 0.0, turn]).as_matrix() @ T0[:3, :3]
+    rest = Rotation.from_matrix(turned.T @ T1[:3, :3]).as_rotvec()
+    out = np.repeat(np.eye(4)[None], len(s), axis=0)
+    yaw = Rotation.from_rotvec(s[:, None] * [0.0, 0.0, turn]).as_matrix()  # (n, 3, 3)
+    out[:, :3, :3] = yaw @ T0[:3, :3] @ Rotation.from_rotvec(s[:, None] * rest).as_matrix()
+    out[:, :3, 3] = T0[:3, 3] + s[:, None] * (T1[:3, 3] - T0[:3, 3])
+    return out
+
+
 @dataclass(frozen=True, kw_only=True)
 class Segment:
     """One motion: the TCP to `goal` (Cartesian) or the arm to `q_goal` (joint space), or a
-    pause, over `duration` [s], while the gripper's control ramps from `grip[0]` to `grip[1]`."""
+    pause, over `duration` [s], while the gripper's control ramps from `grip[0]` to `grip[1]`.
+    A Cartesian move turns the TCP the shortest way, or by `turn` [rad] about the vertical
+    (T_goal's orientation must then be the start's turned by `turn`)."""
 
     label: str
     duration: float
     goal: np.ndarray | None = None  # (4, 4) TCP pose
     q_goal: np.ndarray | None = None  # (7,) arm joints
     grip: tuple[float, float] | None = None  # None: keep the current gripper control
+    turn: float | None = None  # [rad] about the world z axis; None: the geodesic
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,7 +94,10 @@ def plan_segments(
         n = max(1, int(np.ceil(seg.duration / dt)))
         s = min_jerk(np.arange(1, n + 1) / n)
         if seg.goal is not None:
-            path = interpolate_poses(T, seg.goal, s)
+            if seg.turn is None:
+                path = interpolate_poses(T, seg.goal, s)
+            else:
+                path = turn_poses(T, seg.goal, s, seg.turn)
             path = np.concatenate([path, np.repeat(seg.goal[None], SETTLE_TICKS, axis=0)])
             qs, errs = ik.track(q, path, dt)
             final = errs[-1]

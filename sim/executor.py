@@ -349,7 +349,7 @@ class Executor:
         grasp: Grasp | None = None
         try:
             self._unpark()
-            grasp, planned, transfer_z = self._choose(i, oid, target)
+            grasp, planned, transfer_z, long_way = self._choose(i, oid, target)
             self._run_phase("approach", planned[:-3])
             self._mark("close")
             self._held = _Held(body=self.bodies[oid], geoms=self._body_geoms[oid])
@@ -367,7 +367,7 @@ class Executor:
                     f"the object rose {rise * 1000:.0f} mm of {expected * 1000:.0f} mm",
                 )
             self._settle(self.config.measure_settle)
-            place = self._place_segments(oid, grasp, target, transfer_z)
+            place = self._place_segments(oid, grasp, target, transfer_z, long_way=long_way)
             self._run_phase("transfer", place[:1])
             self._settle(self.config.measure_settle)
             in_hand = se3.inverse(robot.tcp_pose(self.data, self.index)) @ self.object_pose(oid)
@@ -431,8 +431,13 @@ class Executor:
 
     def _choose(
         self, i: int, oid: str, target: np.ndarray
-    ) -> tuple[Grasp, list[PlannedSegment], float]:
-        """Pick the best grasp whose whole motion has IK solutions, and plan up to the lift."""
+    ) -> tuple[Grasp, list[PlannedSegment], float, bool]:
+        """Pick the best grasp whose whole motion has IK solutions, and plan up to the lift.
+
+        Per grasp, best first: Cartesian moves all along; the transfer turning the wrist the
+        long way round; then the move above the object in joint space (`_through_joint_space`),
+        with either transfer. Returns the grasp, the planned pick, the transfer height and
+        whether the transfer turns the long way."""
         self._mark("grasp")
         T_pick = self.object_pose(oid)
         others = [
@@ -458,18 +463,73 @@ class Executor:
         for grasp in candidates[: self.config.max_grasp_candidates]:
             transfer_z = self._transfer_height(oid, grasp, T_pick, tops)
             segments = self._pick_segments(grasp, transfer_z)
-            nominal_place = self._place_motion(grasp, grasp.place_tcp, transfer_z)
-            planned = plan_segments(self.ik, self._q_cmd, segments + nominal_place, self._tick_dt)
-            if isinstance(planned, PlanFailure):
+            # the long way round only helps for a turn of more than a quarter
+            ways = (False, True) if abs(grasp.transfer_yaw) > np.pi / 2 else (False,)
+            places = {w: self._place_motion(grasp, grasp.place_tcp, transfer_z, w) for w in ways}
+            for long_way in ways:
+                planned = plan_segments(
+                    self.ik, self._q_cmd, segments + places[long_way], self._tick_dt
+                )
+                if not isinstance(planned, PlanFailure):
+                    return grasp, planned[: len(segments)], transfer_z, long_way
                 first_failure = first_failure or planned
-                continue
-            return grasp, planned[: len(segments)], transfer_z
+            for long_way in ways:
+                alternative = self._through_joint_space(segments, places[long_way])
+                if alternative is not None:
+                    return grasp, alternative[: len(segments)], transfer_z, long_way
         assert first_failure is not None
         raise _StepAbort(
             "unreachable",
             "grasp",
             f"{first_failure.describe()} (best of {min(len(candidates), self.config.max_grasp_candidates)} grasps)",
         )
+
+    def _through_joint_space(
+        self, segments: list[Segment], place: list[Segment]
+    ) -> list[PlannedSegment] | None:
+        """The pick and place again, but with the move above the object made in joint space to
+        a fresh IK solution, for when the Cartesian move from the current arm configuration
+        runs a joint into its limit (typically the wrist, which the transfer then has to turn
+        further) or the descent from it does. Seeds turn the wrist a quarter or a half turn
+        either way from READY; the joint move must keep the TCP within 2 cm of the transfer
+        height. None when no seed gives a plan."""
+        c = self.config
+        k = next(i for i, seg in enumerate(segments) if seg.label == "moving above the object")
+        before = plan_segments(self.ik, self._q_cmd, segments[:k], self._tick_dt)
+        if isinstance(before, PlanFailure):
+            return None
+        q_from = before[-1].q[-1] if before else self._q_cmd
+        above = segments[k].goal
+        assert above is not None
+        z_low = min(self.ik.fk(q_from)[2, 3], above[2, 3]) - 0.02
+        lo, hi = self.index.arm_range[6]
+        for turn in (0.0, -np.pi / 2, np.pi / 2, -np.pi, np.pi):
+            seed = robot.READY_QPOS.copy()
+            seed[0] = np.arctan2(above[1, 3], above[0, 3])
+            seed[6] = np.clip(seed[6] + turn, lo + 0.1, hi - 0.1)
+            sol = self.ik.solve(above, seed)
+            if not sol.ok:
+                continue
+            far = float(np.max(np.abs(sol.q - q_from)))
+            n = max(2, int(np.ceil(far / 0.02)))
+            path = q_from + np.linspace(0.0, 1.0, n)[:, None] * (sol.q - q_from)
+            if min(self.ik.fk(q)[2, 3] for q in path) < z_low:
+                continue  # the joint move would dip towards the objects
+            joint_move = Segment(
+                label=segments[k].label,
+                q_goal=sol.q,
+                duration=max(c.min_move_time, far / c.joint_speed),
+                grip=segments[k].grip,
+            )
+            planned = plan_segments(
+                self.ik,
+                self._q_cmd,
+                [*segments[:k], joint_move, *segments[k + 1 :], *place],
+                self._tick_dt,
+            )
+            if not isinstance(planned, PlanFailure):
+                return planned
+        return None
 
     def _rank_by_wrist(self, grasps: Sequence[Grasp]) -> tuple[list[Grasp], str]:
         """Drop grasps whose pick or place pose has no IK solution; among equally good ones
@@ -567,8 +627,11 @@ class Executor:
             ),
         ]
 
-    def _place_motion(self, grasp: Grasp, place_tcp: np.ndarray, z: float) -> list[Segment]:
-        """transfer, descend, final descent, pause, open, pause, retreat."""
+    def _place_motion(
+        self, grasp: Grasp, place_tcp: np.ndarray, z: float, long_way: bool = False
+    ) -> list[Segment]:
+        """transfer, descend, final descent, pause, open, pause, retreat; the transfer turns the
+        wrist the long way round with `long_way`."""
         c = self.config
         table = robot.gripper_table()
         open_ctrl = table.ctrl_for_gap(grasp.open_gap)
@@ -580,11 +643,20 @@ class Executor:
         near[2, 3] += c.final_approach
         lifted = grasp.pick_tcp.copy()
         lifted[2, 3] = z
+        turn = None
+        if long_way:
+            R = above[:3, :3] @ lifted[:3, :3].T
+            short = float(np.arctan2(R[1, 0], R[0, 0]))
+            turn = short - np.copysign(2 * np.pi, short)
         return [
             Segment(
                 label="transferring",
                 goal=above,
-                duration=self._duration(lifted, above, c.move_speed),
+                duration=max(
+                    self._duration(lifted, above, c.move_speed),
+                    0.0 if turn is None else abs(turn) / c.turn_speed,
+                ),
+                turn=turn,
             ),
             Segment(
                 label="descending to the target",
@@ -607,10 +679,18 @@ class Executor:
         ]
 
     def _place_segments(
-        self, oid: str, grasp: Grasp, target: np.ndarray, z: float, *, skip_transfer: bool = False
+        self,
+        oid: str,
+        grasp: Grasp,
+        target: np.ndarray,
+        z: float,
+        *,
+        skip_transfer: bool = False,
+        long_way: bool = False,
     ) -> list[PlannedSegment]:
         """Plan the place from the current pose (after the lift, or above the target with
-        `skip_transfer`), corrected for the object's pose in the hand."""
+        `skip_transfer`), corrected for the object's pose in the hand; the transfer turns the
+        wrist the long way round with `long_way`."""
         nominal = grasp.place_tcp
         candidates = []
         if self.config.in_hand_correction:
@@ -625,7 +705,7 @@ class Executor:
         candidates.append(nominal)
         failure: PlanFailure | None = None
         for place_tcp in candidates:
-            motion = self._place_motion(grasp, place_tcp, z)
+            motion = self._place_motion(grasp, place_tcp, z, long_way)
             planned = plan_segments(
                 self.ik, self._q_cmd, motion[1:] if skip_transfer else motion, self._tick_dt
             )
