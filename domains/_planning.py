@@ -4,7 +4,9 @@ Rules the order obeys (they are what the executor's oracle needs):
 - an object is moved only when nothing rests on it;
 - it goes to its goal pose only when everything it rests on in the goal is already final;
 - a placement never leaves anything resting on the placed object (no inserting underneath);
-- a target never interpenetrates the objects already there; temporary places keep a
+- a target never interpenetrates the objects already there, and keeps 3 mm from those not
+  in their final place (a goal packs final objects as tightly as it wants, but a placement
+  that grazes an object lying anywhere would shove or tilt it); temporary places keep a
   gripper-sized clearance from everything present and from every goal still to be built;
 - every move changes the object's orientation only by a rotation about the vertical: the
   target is the symmetry-equivalent of the goal pose that a yaw rotation reaches.
@@ -64,6 +66,7 @@ class Planner:
     goal_clearance: float = 0.01  # gap between a temporary place and unbuilt goals [m]
     grid: float = 0.01  # spacing of candidate temporary places [m]
     touch: float = 5e-4  # penetration still counted as touching [m]
+    loose_gap: float = 0.003  # least gap from an object not in its final place [m]
     grasps: GraspCheck | None = None  # when set, every move must have a grasp
     temporary_checks: int = 60  # temporary places whose grasps are checked, nearest first
 
@@ -124,7 +127,8 @@ class Planner:
                 if not all(is_done(s) for s in goal_sup[i]):
                     continue
                 pose = self._reachable(mesh[i], state[i], target[i])
-                if pose is None or not self._fits(i, place(i, self.parts[mesh[i]], pose), bodies):
+                body = place(i, self.parts[mesh[i]], pose) if pose is not None else None
+                if body is None or not self._fits(i, body, bodies, is_done):
                     continue
                 if robot is not None and not robot.allows(i, pose):
                     continue
@@ -168,11 +172,16 @@ class Planner:
                 best, best_yaw = cand, yaw
         return best
 
-    def _fits(self, i: str, body: Body, bodies: Mapping[str, Body]) -> bool:
+    def _fits(self, i: str, body: Body, bodies: Mapping[str, Body], is_done) -> bool:
+        """`i` may go to `body`: it touches final objects at most as closely as the goal packs
+        them, keeps `loose_gap` from the others (lying anywhere, they would be shoved), and
+        nothing ends up resting on it."""
         others = [b for j, b in bodies.items() if j != i]
-        for b in others:
+        for j, b in bodies.items():
+            if j == i:
+                continue
             gap, _ = body_separation(body, b, cutoff=0.01)
-            if gap < -self.touch:
+            if gap < (-self.touch if is_done(j) else self.loose_gap):
                 return False
         # nothing may end up resting on the object just placed
         after = supports([body, *others])
@@ -189,7 +198,7 @@ class Planner:
             for j in movable:
                 if (
                     j != i
-                    and body_separation(goal_bodies[i], bodies[j], cutoff=0.01)[0] < -self.touch
+                    and body_separation(goal_bodies[i], bodies[j], cutoff=0.01)[0] < self.loose_gap
                 ):
                     return j, True
         # 2. something rests on an object that still has to move
