@@ -23,17 +23,22 @@ knob's two axes.
 4. Order. Greedy, one transfer per step: among the pieces whose target is free (no other
    piece on it) and whose knob the fingers can take at the pick and at the place along the
    same knob axis (no other knob in the fingers' way), place first the one that keeps every
-   other unplaced piece grippable at its goal afterwards, then the one that would lose a
-   knob axis to a neighbour placed later: while both axes are open the gripper has twice the
-   grasps, and so more wrist angles the arm can reach (this counts most for pieces without
-   symmetry and with a large turn from pick to place). The goal state's `blocks` edges (from
-   `relate`) say which placed piece takes away which knob axis; the same test is made from
-   geometry on the spread targets, so a graph without `blocks` edges (or a noisy one) still
-   works: edges only add to the ordering constraints. When nothing can be placed, a piece
-   lying on a pending goal (a start piece in the figure, or a cycle of pieces swapping
-   places) goes to a temporary place first: on the table inside the robot's comfortable
-   reach, 25 mm clear of every piece (room for the fingers) and 12 mm clear of every unbuilt
-   goal.
+   other unplaced piece grippable at its goal afterwards, then the one that costs the pieces
+   still to come least. While both of a piece's knob axes are open the gripper can hold it
+   four ways instead of two; a piece without symmetry that turns far from pick to place
+   needs them (the FR3's last joint turns ±173°, and one grasp must suit both ends), so
+   taking away such a piece's axis costs, and a piece about to lose its own axis to a later
+   neighbour gains by going first. The goal state's `blocks` edges (from `relate`) say which
+   placed piece takes away which knob axis; the same test is made from geometry on the
+   spread targets, so a graph without `blocks` edges (or a noisy one) still works: edges
+   only add to the ordering constraints. When nothing can be placed, a piece lying on a
+   pending goal (a start piece in the figure, or a cycle of pieces swapping places) goes to
+   a temporary place first: on the table inside the robot's comfortable reach, 25 mm clear
+   of every piece (room for the fingers) and 12 mm clear of every unbuilt goal.
+5. Regrasp. A piece that can be held only one way at its goal (a neighbour's knob takes the
+   other axis) and must turn more than 100° is first turned halfway where it lies (or at the
+   nearest free place), in the open where both ways work; then the long turn is two short
+   ones.
 """
 
 import numpy as np
@@ -67,6 +72,8 @@ SPREAD_GAP = 0.0015  # gaps opened between goal pieces [m]
 SPREAD_SHIFT = 0.0015  # … moving no piece more than this [m]
 FREE_GAP = 0.001  # a target this close to a piece not yet at its goal is occupied [m]
 PLACED_GAP = -0.0005  # … to a piece at its goal (spreading could not open everything) [m]
+EASY_TURN = np.radians(70.0)  # a turn the wrist manages with either of two grasps
+REGRASP_TURN = np.radians(100.0)  # longer turns held one way only are split in two
 TEMPORARY = ((0.025, 0.012), (0.015, 0.006), (0.008, 0.002))  # (to pieces, to goals) [m]
 GRID = 0.01  # spacing of candidate temporary places [m]
 REGION_X = (0.32, 0.68)  # where temporary places may go [m]
@@ -122,13 +129,13 @@ def _free_axes(p, others):
     return free
 
 
-def _grippable(piece, at_pick, at_place, others_pick, others_place):
-    """Whether one grasp of the knob works at both ends (it is held from pick to place)."""
-    pick = _free_axes(at_pick, others_pick)
-    place = _free_axes(at_place, others_place)
-    if SYMMETRY[piece] == 4:  # a quarter turn maps one knob axis onto the other
-        return bool(pick) and bool(place)
-    return bool(pick & place)
+def _grasp_axes(key, at_pick, at_place, others):
+    """How many ways (knob axes, 0–2) one grasp can hold the piece at both ends."""
+    pick = _free_axes(at_pick, others)
+    place = _free_axes(at_place, others)
+    if SYMMETRY[key] == 4:  # a quarter turn maps one knob axis onto the other
+        return min(len(pick), len(place))
+    return len(pick & place)
 
 
 def _flat(T):
@@ -179,9 +186,10 @@ def _blockers_from(graph, ids):
     return out
 
 
-def _temporary(i, current, pending_goals):
-    """A free place for piece i on the table, as near as possible to where it is."""
-    p = current[i]
+def _temporary(i, current, pending_goals, yaw=None):
+    """A free place for piece i on the table (turned to `yaw`), as near as possible to where
+    it is."""
+    p = current[i] if yaw is None else current[i].moved(current[i].x, current[i].y, yaw)
     others = [q for j, q in current.items() if j != i]
     xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
     ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
@@ -198,6 +206,21 @@ def _temporary(i, current, pending_goals):
                 continue
             return q
     return None
+
+
+def _turned(i, current, yaw, pending_goals):
+    """Piece i turned to `yaw` where it lies if there is room (and both knob axes free),
+    else at the nearest free place."""
+    p = current[i].moved(current[i].x, current[i].y, yaw)
+    others = [q for j, q in current.items() if j != i]
+    if (
+        _inside(p.outline, REGION_X, REGION_Y, REACH)
+        and all(_gap(p, o) >= TEMPORARY[0][0] for o in others)
+        and all(_gap(p, g) >= TEMPORARY[0][1] for g in pending_goals)
+        and len(_free_axes(p, others)) == 2
+    ):
+        return p
+    return _temporary(i, current, pending_goals, yaw=yaw)
 
 
 def _targets(goal, current, done):
@@ -270,6 +293,7 @@ def plan(start_state, goal_state):
     placed = set(done)
     pending = [i for i in ids if i not in done]
     steps = []
+    turned = set()
     for _ in range(3 * len(ids)):
         if not pending:
             return {"status": "ok", "steps": steps}
@@ -284,17 +308,24 @@ def plan(start_state, goal_state):
                 _gap(t, q) < (PLACED_GAP if j in placed else FREE_GAP) for j, q in others.items()
             ):
                 continue
-            if not _grippable(
-                goal[i].key, current[i], t, list(others.values()), list(others.values())
-            ):
-                continue
-            ready.append((i, t))
+            ways = _grasp_axes(goal[i].key, current[i], t, list(others.values()))
+            if ways:
+                ready.append((i, t, ways))
         if ready:
-            need = {
-                j: 2.0 / SYMMETRY[goal[j].key] + abs(t.yaw - current[j].yaw) / np.pi
-                for j, t in ready
-            }
-            i, t = min(ready, key=lambda it: _priority(it[0], blockers, placed, pending, need))
+            need = {j: _need(goal[j].key, target[j].yaw, current[j].yaw) for j in pending}
+            i, t, ways = min(
+                ready, key=lambda it: _priority(it[0], blockers, placed, pending, need)
+            )
+            turn = t.yaw - current[i].yaw
+            if ways < 2 and abs(turn) > REGRASP_TURN and i not in turned:
+                # held one way only, with a long turn: turn it halfway first, in the open
+                goals_left = [target[j] for j in pending if j != i]
+                spot = _turned(i, current, current[i].yaw + turn / 2, goals_left)
+                if spot is not None:
+                    turned.add(i)
+                    current[i] = spot
+                    steps.append({"object": i, "target_pose": spot.pose()})
+                    continue
             current[i] = t
             placed.add(i)
             pending.remove(i)
@@ -312,20 +343,36 @@ def plan(start_state, goal_state):
     return {"status": "infeasible", "reason": f"no plan within {len(steps)} moves"}
 
 
+def _need(key, goal_yaw, current_yaw):
+    """How much a piece needs both knob axes free at its goal, in [0, 1]: with one axis the
+    gripper holds it two ways (half a turn apart), and the wrist's range may not cover both
+    the pick and the turn to the place; a turn of up to 70° (modulo the piece's symmetry) is
+    always fine."""
+    n = SYMMETRY[key]
+    turn = abs(_nearest_yaw(goal_yaw, current_yaw, n) - current_yaw)
+    return float(np.clip((turn - EASY_TURN) / (np.pi - EASY_TURN), 0.0, 1.0))
+
+
 def _priority(i, blockers, placed, pending, need):
-    """Sort key of a placeable piece: does placing it strand another piece; how much it would
-    lose by waiting — knob axes, free now, that a later placement takes away, weighted by
-    `need` (pieces with less symmetry and a larger turn from pick to place have fewer wrist
-    angles to spare); its id."""
+    """Sort key of a placeable piece: does placing it strand another piece (no knob axis
+    left); what it costs the pieces still to come (knob axes it takes away, weighted by their
+    `need`) minus what it saves itself by going now (its own axes a later piece would take);
+    its id."""
     after = placed | {i}
     stranded = sum(
         1 for j in pending if j != i and all(blockers[j][axis] & after for axis in (0, 1))
+    )
+    harm = sum(
+        need[j]
+        for j in pending
+        if j != i
+        and any(i in blockers[j][axis] and not blockers[j][axis] & placed for axis in (0, 1))
     )
     later = set(pending) - {i}
     losing = sum(
         1 for axis in (0, 1) if not blockers[i][axis] & placed and blockers[i][axis] & later
     )
-    return (stranded, -losing * need[i], i)
+    return (stranded, round(harm - losing * need[i], 9), i)
 
 
 def _in_the_way(pending, target, current, placed):
