@@ -3,8 +3,11 @@
 Design rule: the predicate is exactly the executor's, `sim.grasp.plan_grasps` with every other
 object as a neighbour at both the pick and the place (no stricter margin: tangram pieces are
 packed so that the fingertips pass 2 mm above the neighbours' plates, the executor's smaller
-clearance). `sim` is imported on first use only: `domains` stays importable without MuJoCo,
-while using a `GraspCheck` needs the robot models (`MENAGERIE_ROOT`).
+clearance), plus what the executor takes for granted: the object rises straight up from the
+pick and comes straight down onto the place, so nothing may hang above either (a beam laid
+across the pillars over the roof's end would be knocked off when the roof is lifted).
+`sim` is imported on first use only: `domains` stays importable without MuJoCo, while using a
+`GraspCheck` needs the robot models (`MENAGERIE_ROOT`).
 """
 
 from __future__ import annotations
@@ -16,12 +19,16 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from domains._geometry import Body, ConvexPart, body_separation, place
+
 NEAR = 0.2  # neighbours farther than this (horizontally) from the object cannot be hit [m]
+UP = np.array([0.0, 0.0, 1.0])  # the vertical sweep above a pick or a place [m]
+TOUCH = 5e-4  # penetration of the sweep still counted as touching [m]
 
 
 @dataclass(frozen=True, kw_only=True)
 class Verdict:
-    """Whether a move has a grasp; if not, the neighbours that blocked it and why."""
+    """Whether the robot can make a move; if not, the neighbours in the way and why."""
 
     ok: bool
     blockers: tuple[str, ...] = ()  # most blocking first
@@ -30,28 +37,31 @@ class Verdict:
 
 @dataclass(frozen=True, kw_only=True)
 class Infeasible:
-    """The first step of an order that has no grasp."""
+    """The first step of an order that the robot cannot make."""
 
     step: int
     object: str
     verdict: Verdict
 
     def __str__(self) -> str:
-        return f"step {self.step} ({self.object}): no grasp: {self.verdict.reason}"
+        return f"step {self.step} ({self.object}): {self.verdict.reason}"
 
 
 class GraspCheck:
-    """Grasp feasibility of single moves, cached on the poses involved."""
+    """Whether the robot can make single moves (a grasp; nothing above the pick or the
+    place), cached on the poses involved."""
 
     def __init__(
         self,
         meshes: Mapping[str, trimesh.Trimesh],
         symmetries: Mapping[str, np.ndarray],
+        parts: Mapping[str, Sequence[ConvexPart]],
         *,
         margins: tuple[float, ...] = (0.006, 0.002),
     ) -> None:
         self.meshes = meshes  # mesh key → mesh (object frame)
         self.symmetries = symmetries  # mesh key → (n, 4, 4)
+        self.parts = parts  # mesh key → convex parts (object frame)
         self.margins = margins
         self._cache: dict[Any, Verdict] = {}
         self._xy: dict[str, np.ndarray] = {
@@ -86,7 +96,7 @@ class GraspCheck:
     def first_infeasible(
         self, start: Sequence[Mapping], steps: Sequence[Mapping]
     ) -> Infeasible | None:
-        """The first step of `steps` from the records `start` that has no grasp, or None."""
+        """The first step of `steps` from the records `start` the robot cannot make, or None."""
         state = {r["id"]: (r["mesh"], np.asarray(r["pose"], float)) for r in start}
         for k, step in enumerate(steps):
             oid = step["object"]
@@ -117,8 +127,34 @@ class GraspCheck:
                 out.append((j, m, _key(pose)))
         return tuple(out)
 
+    def _above(self, mesh: str, T: np.ndarray, near: tuple, pool: Mapping) -> list[str]:
+        """Neighbours in the vertical sweep of the object's convex parts above pose `T`."""
+        sweep = []
+        for p in place("", self.parts[mesh], T).parts:
+            v = p.vertices
+            sweep.append(ConvexPart.from_points(np.vstack([v, v + UP])))
+        swept = Body(id="", parts=tuple(sweep))
+        out = []
+        for j, m, _ in near:
+            body = place(j, self.parts[m], pool[j][1])
+            if body_separation(swept, body, cutoff=TOUCH)[0] < -TOUCH:
+                out.append(j)
+        return out
+
     def _plan(self, oid, mesh, T_from, T_to, others, place_others, key) -> Verdict:
         from sim.grasp import Obstacle, plan_grasps  # sim builds on domains
+
+        for where, T, near, pool in (
+            ("pick", T_from, key[4], others),
+            ("place", T_to, key[5], place_others),
+        ):
+            above = self._above(mesh, T, near, pool)
+            if above:
+                return Verdict(
+                    ok=False,
+                    blockers=tuple(above),
+                    reason=f"{above[0]!r} is above the object at the {where}",
+                )
 
         def obstacles(near, pool):
             return [Obstacle(id=j, mesh=self.meshes[m], pose=pool[j][1]) for j, m, _ in near]
@@ -136,7 +172,7 @@ class GraspCheck:
         if report.grasps:
             return Verdict(ok=True)
         blockers = tuple(sorted(report.blockers, key=lambda j: -report.blockers[j]))
-        return Verdict(ok=False, blockers=blockers, reason=report.summary())
+        return Verdict(ok=False, blockers=blockers, reason=f"no grasp: {report.summary()}")
 
 
 def _key(T: np.ndarray) -> bytes:

@@ -337,7 +337,7 @@ class Domain:
     def grasps(self) -> GraspCheck:
         """The robot's grasp predicate for moves of this domain's objects (needs the robot
         models: `MENAGERIE_ROOT`)."""
-        return GraspCheck(self._meshes, self._symmetries)
+        return GraspCheck(self._meshes, self._symmetries, self.parts)
 
     @cached_property
     def robot_planner(self) -> Planner:

@@ -86,3 +86,20 @@ def test_grasp_verdicts_name_the_blocking_neighbour(cubes):
     assert not verdict.ok and verdict.blockers and set(verdict.blockers) <= set(others)
     del others["a"], others["b"]  # the x axis is free again
     assert cubes.grasps.pickable("x", "cube", cube, others).ok
+
+
+def test_nothing_may_hang_above_a_pick_or_a_place():
+    assembly = domains.load("assembly")
+    roof = yaw_pose(0.5, 0.0, 0.0, 0.0)
+    # the beam 40 mm above the roof's end, as if laid across pillars over it
+    beam = {"beam": ("beam", yaw_pose(0.58, 0.0, 0.08, np.pi / 2))}
+    verdict = assembly.grasps.pickable("roof", "roof", roof, beam)
+    assert not verdict.ok and verdict.blockers == ("beam",)
+    assert "above the object at the pick" in verdict.reason
+    clear = {"beam": ("beam", yaw_pose(0.5, 0.2, 0.08, np.pi / 2))}
+    assert assembly.grasps.pickable("roof", "roof", roof, clear).ok
+    # and none may come down onto a place under it
+    target = yaw_pose(0.5, 0.3, 0.0, 0.0)
+    over_target = {"beam": ("beam", yaw_pose(0.5, 0.3, 0.08, 0.0))}
+    verdict = assembly.grasps.move("roof", "roof", roof, target, {}, over_target)
+    assert not verdict.ok and "at the place" in verdict.reason
