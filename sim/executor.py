@@ -70,6 +70,7 @@ class ExecutorConfig:
     release_height: float = 0.001  # the object is let go this far above its target [m]
     in_hand_correction: bool = True  # read the object's pose in the hand (see module doc)
     measure_settle: float = 0.2  # pause before reading the object's pose in the hand [s]
+    near_settle: float = 0.15  # the same, at the end of the descent onto the target [s]
     park_after: bool = True
     park_time: float = 1.5  # least time of joint moves between READY and PARK [s]
     joint_speed: float = 1.2  # mean speed of the largest joint in joint moves [rad/s]
@@ -374,10 +375,15 @@ class Executor:
             if np.linalg.norm(in_hand[:3, 3] - se3.inverse(grasp.T_object_tcp)[:3, 3]) > 0.03:
                 raise _StepAbort("dropped", "transfer", "the object left the hand")
             if self.config.in_hand_correction:  # again, for any slip during the transfer
-                place = place[:1] + self._place_segments(
-                    oid, grasp, target, transfer_z, skip_transfer=True
-                )
-            self._run_phase("place", place[1:3])
+                place = place[:1] + self._place_segments(oid, grasp, target, transfer_z, skip=1)
+            self._run_phase("place", place[1:2])
+            if self.config.in_hand_correction:
+                # and once more before the last slow centimetres: the descent sways the object
+                # in the hand and the arm off its path by up to a millimetre, and tangram
+                # pieces go into gaps of half a millimetre
+                self._settle(self.config.near_settle)
+                place = place[:2] + self._place_segments(oid, grasp, target, transfer_z, skip=2)
+            self._run(place[2:3])
             self._mark("release")
             self._run(place[3:6])
             self._held = None
@@ -685,12 +691,13 @@ class Executor:
         target: np.ndarray,
         z: float,
         *,
-        skip_transfer: bool = False,
+        skip: int = 0,
         long_way: bool = False,
     ) -> list[PlannedSegment]:
-        """Plan the place from the current pose (after the lift, or above the target with
-        `skip_transfer`), corrected for the object's pose in the hand; the transfer turns the
-        wrist the long way round with `long_way`."""
+        """Plan the place from the current pose, corrected for the object's pose in the hand:
+        from after the lift, or with `skip` 1 from above the target, 2 from the end of the
+        descent (`final_approach` above the release); the transfer turns the wrist the long
+        way round with `long_way`."""
         nominal = grasp.place_tcp
         candidates = []
         if self.config.in_hand_correction:
@@ -706,9 +713,7 @@ class Executor:
         failure: PlanFailure | None = None
         for place_tcp in candidates:
             motion = self._place_motion(grasp, place_tcp, z, long_way)
-            planned = plan_segments(
-                self.ik, self._q_cmd, motion[1:] if skip_transfer else motion, self._tick_dt
-            )
+            planned = plan_segments(self.ik, self._q_cmd, motion[skip:], self._tick_dt)
             if not isinstance(planned, PlanFailure):
                 return planned
             failure = failure or planned
