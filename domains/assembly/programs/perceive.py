@@ -48,8 +48,8 @@ SAT_MIN = 0.3
 VAL_MIN = 0.1
 MIN_PIXELS = 25  # fewer labelled pixels: the part is not seen
 WEAK_PIXELS = 400  # fewer: its fit may be moved to where physics needs it
-COARSE_POINTS = 120
-FINE_POINTS = 400
+COARSE_POINTS = 80
+FINE_POINTS = 200
 SAMPLE_EDGE = 0.004  # model surface sampling [m]
 TRUNCATE = 0.006  # residuals beyond this count as outliers [m]
 SEEN_THROUGH = 0.008  # model surface this far in front of what the camera sees [m]
@@ -66,7 +66,9 @@ CONFLICT_DEPTH = 0.003  # parts interpenetrating deeper cannot both be right [m]
 ALTERNATIVES = 5  # hypotheses weighed for a part in conflict
 ALTERNATIVE_MARGIN = 0.003  # how much worse [m] an alternative may explain the image
 WIDE_ANCHORS = 5
-TIE = 0.00015  # hypotheses this close [m] explain the image equally well
+TIE = 0.0003  # hypotheses this close [m] explain the image equally well
+SLIDE_STEP = 0.004  # [m]
+FINE_ITERATIONS = 8
 GRID_CELL = 0.0025  # [m]
 GRID_MARGIN = 0.025  # [m]
 NEIGHBOURS = 6
@@ -320,6 +322,7 @@ class _Part:
         top = float(np.percentile(pts[:, 2], 97))
         length = float(np.ptp((np.concatenate(model.shape.pieces) @ R0.T)[:, 0]))
         shifts = (0.0, -length / 4, length / 4) if length > 0.06 else (0.0,)
+        starts = []
         for j in range(8):
             yaw = self.heading + j * np.pi / 4
             R = _rz(yaw) @ R0
@@ -327,9 +330,15 @@ class _Part:
             t[2] = top - model.highest[k]  # the top shows from above, even when cut off
             for n, shift in enumerate(shifts):  # partly hidden long parts: along their length
                 t1 = t + shift * R[:, 0] * [1, 1, 0] / max(np.linalg.norm(R[:2, 0]), 1e-9)
-                x = _icp(model, k, [t1[0], t1[1], t1[2], yaw], self.coarse, self.eye, 4)
-                score = _score(model, R0, x, self.coarse, self.eye, self.view)[0]
-                self.tries.append((score + OTHER_POSE_PENALTY * (k > 0), k, j, n, x))
+                x = np.array([t1[0], t1[1], t1[2], yaw])
+                d = _match(model, R, t1, self.coarse, self.eye)[3]
+                starts.append((float(np.mean(np.minimum(d, 3 * TRUNCATE))), j, n, x))
+        starts.sort(key=lambda t: t[:3])
+        keep = [next(t for t in starts if t[1] == j) for j in range(8)]  # every heading
+        for _, j, n, x in keep:  # from its offset nearest to the points
+            x = _icp(model, k, x, self.coarse, self.eye, 4)
+            score = _score(model, R0, x, self.coarse, self.eye, self.view)[0]
+            self.tries.append((score + OTHER_POSE_PENALTY * (k > 0), k, j, n, x))
         self.tries.sort(key=lambda t: t[:4])
         self.rests_tried = k + 1
 
@@ -367,7 +376,7 @@ class _Part:
             if (k, j, m) in self.refined:
                 continue
             self.refined.add((k, j, m))
-            self.add(k, _icp(self.model, k, x, self.pts, self.eye, 12))
+            self.add(k, _icp(self.model, k, x, self.pts, self.eye, FINE_ITERATIONS))
 
     def add(self, k, x):
         R0 = self.model.rests[k]
@@ -387,7 +396,7 @@ class _Part:
     def _slide(self, R0, x, score, fit):
         """Pattern search on the full score (points and free space) around x."""
         steps = np.array([0.008, 0.008, 0.0, np.radians(4.0)])
-        for _ in range(40):
+        for _ in range(24):
             moved = False
             for d in range(4):
                 if steps[d] == 0:
@@ -405,6 +414,46 @@ class _Part:
                     break
         return x, score, fit
 
+    def slide_under(self, h, coms, masses):
+        """The hypothesis h moved along the part's length to where the joint centre of mass of
+        its load is best centred, among the positions explaining the image as well as h."""
+        model, R = self.model, h[2]
+        u = R[:, 0] * [1.0, 1.0, 0.0]
+        if np.linalg.norm(u) < 0.5:
+            return h
+        u /= np.linalg.norm(u)
+        k = next(
+            (
+                k
+                for k, R0 in enumerate(model.rests)
+                if np.allclose(R0, _rz(-np.arctan2(R[1, 0], R[0, 0])) @ R, atol=1e-6)
+            ),
+            0,
+        )
+        length = float(np.ptp((np.concatenate(model.shape.pieces) @ model.rests[k].T)[:, 0]))
+        yaw = float(np.arctan2(R[1, 0], R[0, 0]))
+        load = np.average(np.array(coms)[:, :2], axis=0, weights=masses)
+        rows = []
+        for d in np.arange(-length / 2, length / 2 + 1e-9, SLIDE_STEP):
+            best_here = None
+            for turn in np.radians([0.0, -2.0, 2.0, -4.0, 4.0]):  # the far end swings
+                x = np.array([*(h[3] + d * u), yaw + turn])
+                sc = _score(model, model.rests[k], x, self.pts, self.eye, self.view)
+                if best_here is None or sc[0] < best_here[0][0]:
+                    best_here = (sc, d, x)
+            rows.append(best_here)
+        best = min(r[0][0] for r in rows)
+        if best > h[0] + TIE:
+            return h
+        centre = R @ model.shape.centre_of_mass
+        fits = [r for r in rows if r[0][0] <= best + TIE]
+        (score, fit), _, x = min(
+            fits, key=lambda r: (abs((r[2][:2] + centre[:2] - load) @ u[:2]), r[1])
+        )
+        if np.linalg.norm(x[:3] - h[3]) < 1e-9 and x[3] == yaw:
+            return h
+        return (score, fit, _rz(x[3]) @ model.rests[k], x[:3])
+
     def near(self, anchors):
         """Hypotheses where well-seen neighbours suggest: stacked under or on one, turned like
         it (a beam under a roof shows only its ends)."""
@@ -415,7 +464,7 @@ class _Part:
             z = self.hyps[0][3][2]
             for k in range(4):
                 x0 = [T[0, 3], T[1, 3], z, yaw0 + k * np.pi / 2]
-                self.add(0, _icp(self.model, 0, x0, self.pts, self.eye, 12))
+                self.add(0, _icp(self.model, 0, x0, self.pts, self.eye, FINE_ITERATIONS))
 
 
 # -- physics -------------------------------------------------------------------------------
@@ -537,9 +586,7 @@ def _conflicts(poses, shapes, pixels, missing_heights, moves):
 def _choose(parts, shapes, missing_heights):
     """One hypothesis per part, physically consistent where the image allows."""
     pixels = {i: p.pixels for i, p in parts.items()}
-    anchors = [
-        _pose(p.hyps[0][2], p.hyps[0][3]) for p in parts.values() if p.hyps[0][0] <= CONTEXT_SCORE
-    ]
+    anchors = [_pose(p.hyps[0][2], p.hyps[0][3]) for p in parts.values()]
     for i in sorted(parts):
         if parts[i].hyps[0][0] > CONTEXT_SCORE:
             parts[i].near([T for T in anchors if not np.allclose(T[:3, 3], parts[i].hyps[0][3])])
@@ -574,30 +621,23 @@ def _choose(parts, shapes, missing_heights):
             if i not in found and len(found) < len(conflicts):
                 choice[i], poses, conflicts = h, trial, found
                 break
-    # a part carrying others whose pose the image cannot settle (a beam seen end-on under a
-    # cylinder shows a patch that fits anywhere along it) is put where its load is centred
+    # a part carrying others whose position along its length the image cannot settle (a beam
+    # seen end-on under a cylinder shows a patch that fits anywhere along it) is put where its
+    # load is centred on it, among the positions that explain the image as well as the best
     sup = supports(_records(poses), shapes, contact_tol=0.003)
     for i in sorted(parts):
         loads = sorted(j for j in poses if i in sup[j])
         if not loads:
             continue
-        parts[i].refine(3)
-        best = None
-        for h in list(parts[i].hyps):
-            if h[0] > choice[i][0] + TIE:
-                continue
-            trial, found = posed({**choice, i: h}) if h is not choice[i] else (poses, conflicts)
-            if len(found) > len(conflicts):
-                continue
-            com = {
-                j: trial[j][:3, :3] @ shapes[j].centre_of_mass + trial[j][:3, 3]
-                for j in [i, *loads]
-            }
-            off = sum(float(np.linalg.norm(com[j][:2] - com[i][:2])) for j in loads)
-            if best is None or off < best[0] - 1e-4:
-                best = (off, h, trial, found)
-        if best is not None:
-            _, choice[i], poses, conflicts = best
+        h = parts[i].slide_under(
+            choice[i],
+            [poses[j][:3, :3] @ shapes[j].centre_of_mass + poses[j][:3, 3] for j in loads],
+            [shapes[j].volume for j in loads],
+        )
+        if h is not choice[i]:
+            trial, found = posed({**choice, i: h})
+            if len(found) <= len(conflicts):
+                choice[i], poses, conflicts = h, trial, found
     return poses
 
 
