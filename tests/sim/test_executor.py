@@ -278,3 +278,49 @@ def test_a_knob_plate_and_a_tall_pillar_are_placed_precisely():
     for step in result.steps:
         assert step.position_error < 0.003 and step.yaw_error < np.radians(2.0), step
     assert result.steps[1].grasp.width == pytest.approx(0.015, abs=1e-6)
+
+
+def _asymmetric(x: float, y: float, yaw: float) -> Executor:
+    """One cube at (x, y, yaw) that counts as asymmetric: its target yaw is exact."""
+    model, data = cube_scene({"c": (x, y, yaw)})
+    return Executor(model, data, {"c": (CUBE, None)})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("yaw", "turn", "how"),
+    [(0.0, 159.0, "long way"), (50.0, -170.0, "joint space")],
+    ids=["transfer-turns-the-long-way", "approach-in-joint-space"],
+)
+def test_a_turn_the_wrist_cannot_take_the_short_way(yaw, turn, how):
+    # beside the robot on its left, turned by ~160° on the way to the right: the geodesic wrist
+    # turn runs joint 7 into its limit from the configuration the move starts in
+    target = _at(0.5, -0.2, yaw=np.radians(yaw + turn))
+    ex = _asymmetric(0.36, 0.24, np.radians(yaw))
+    ex._unpark()
+    _, planned, _, long_way = ex._choose(0, "c", target)
+    joint_approach = any(
+        p.segment.label == "moving above the object" and p.segment.q_goal is not None
+        for p in planned
+    )
+    assert (long_way, joint_approach) == ((True, False) if how == "long way" else (False, True))
+    ex = _asymmetric(0.36, 0.24, np.radians(yaw))
+    result = ex.execute([{"object": "c", "target_pose": target}])
+    assert result.ok, result.failure
+    assert result.steps[0].position_error < 0.002
+    assert result.steps[0].yaw_error < np.radians(1.0)
+
+
+def test_turn_poses_go_the_long_way_round_and_end_on_the_goal():
+    from sim._motion import turn_poses
+
+    down = se3.make(np.diag([1.0, -1.0, -1.0]), [0.4, 0.2, 0.2])  # TCP pointing down
+    goal = se3.rot_z(np.radians(150.0)) @ down
+    goal[:3, :3] = goal[:3, :3] @ se3.rotvec_to_matrix([0.02, 0.0, 0.0])  # and a small tilt
+    goal[:3, 3] = [0.5, -0.2, 0.2]
+    turn = np.radians(150.0 - 360.0)
+    path = turn_poses(down, goal, np.linspace(0.0, 1.0, 5), turn)
+    assert np.allclose(path[0], down) and np.allclose(path[-1], goal, atol=1e-9)
+    # halfway the x axis of the TCP has turned by turn / 2 = -105°, not by +75°
+    mid = path[2][:3, :3] @ down[:3, :3].T
+    assert np.degrees(np.arctan2(mid[1, 0], mid[0, 0])) == pytest.approx(-105.0, abs=1.0)
