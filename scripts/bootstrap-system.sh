@@ -13,8 +13,10 @@ if command -v dpkg-query >/dev/null 2>&1; then
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
 fi
-# Docker Desktop / other engines are fine: only insist on docker.io when no docker CLI exists.
-if command -v docker >/dev/null 2>&1; then
+# Docker Desktop / other engines are fine: only insist on docker.io when no engine answers and
+# none can be started here (a docker CLI alone, as some images ship in /usr/local/bin, is not
+# an engine).
+if docker info >/dev/null 2>&1 || command -v dockerd >/dev/null 2>&1; then
   missing=("${missing[@]/docker.io}")
 fi
 read -r -a missing <<<"${missing[*]:-}"
