@@ -111,6 +111,88 @@ SYMMETRY = {
 SHAPES = {k: Shape.from_pieces(v) for k, v in PIECES.items()}
 REST = {k: [p.rotation for p in stable_poses(s)] for k, s in SHAPES.items()}
 
+# -- the gripper: a Robotiq 2F-85 coming down from above ---------------------------------------
+# Its jaws close on two opposite vertical faces at most 80 mm apart; every part has such pairs
+# across its 30–50 mm side (the cylinder: across its diameter, any way round). The fingers
+# and the wrist above them need room beside the part at the pick and at the place alike.
+OPENING = 0.008  # jaw opening beyond the part's width, per side, for the approach [m]
+GRIP_MARGIN = 0.002  # clearance kept from the neighbours [m]
+FINGER_ROOM = 0.05  # a part moved out of the fingers' way keeps this far from them [m]
+# how the gripper takes each part, in the part's frame: (closing axis, width, fingertip
+# heights, positions along the faces) [m] — the pads (22 mm wide, 37.5 mm tall) sit on both
+# faces where both are flat over the pad, low (3 mm above the table), or as low as the free
+# height between the fingers allows for tall parts, or high on the faces; centred on the
+# part, and along long faces also off-centre (to dodge a neighbour)
+FACES = {
+    "pillar": [((1, 0), 0.03, (0.0259, 0.065), (0.0,)), ((0, 1), 0.03, (0.0259, 0.065), (0.0,))],
+    "beam": [((0, 1), DEPTH, (0.003, 0.005), (0.0, -0.0345, 0.0345, -0.069, 0.069))],
+    "block": [
+        ((0, 1), DEPTH, (0.003, 0.015), (0.0, -0.007, 0.007, -0.014, 0.014)),
+        ((1, 0), 0.05, (0.003, 0.015), (0.0, -0.0065, 0.0065)),
+    ],
+    "arch": [
+        ((0, 1), DEPTH, (0.0114,), (-0.041, 0.041, -0.049)),
+        ((0, 1), DEPTH, (0.05,), (0.0, -0.0245, 0.0245, -0.049, 0.049)),
+    ],
+    "roof": [((0, 1), DEPTH, (0.003, 0.025), (0.0,))],
+    "cylinder": [
+        ((np.cos(a), np.sin(a)), 0.04, (0.0069, 0.045), (0.0,)) for a in np.arange(8) * np.pi / 8
+    ],
+    "lblock": [((0, 1), DEPTH, (0.0165, 0.055), (-0.021, -0.029))],
+}
+
+
+def _finger_boxes(opening, flip):
+    """The gripper as boxes in a grasp frame: origin between the fingertips, a along the
+    closing direction, b along the faces, z up [m]; the wrist and arm above it lean to one
+    side, mirrored with `flip`."""
+    g = opening / 2
+    boxes = []
+    for side in (-1.0, 1.0):
+        for a0, a1, b, z0, z1 in (
+            (g, g + 0.017, 0.012, 0.0, 0.04),
+            (g, g + 0.033, 0.017, 0.04, 0.06),
+            (g, max(g + 0.0315, 0.064), 0.02, 0.06, 0.12),
+        ):
+            boxes.append((sorted((side * a0, side * a1)), (-b, b), (z0, z1)))
+    boxes.append(((-0.038, 0.038), (-0.038, 0.038), (0.12, 0.16)))
+    boxes.append(
+        (sorted((flip * -0.042, flip * 0.082)), sorted((flip * -0.082, flip * 0.042)), (0.16, 0.6))
+    )
+    out = []
+    for (a0, a1), (b0, b1), (z0, z1) in boxes:
+        a0, a1, b0, b1 = a0 - GRIP_MARGIN, a1 + GRIP_MARGIN, b0 - GRIP_MARGIN, b1 + GRIP_MARGIN
+        z0 -= GRIP_MARGIN
+        out.append(np.array([(a, b, z) for a in (a0, a1) for b in (b0, b1) for z in (z0, z1)]))
+    return Shape.from_pieces(out)
+
+
+_FINGERS = {}
+
+
+def _fingers(opening, flip):
+    key = (round(opening, 4), flip)
+    if key not in _FINGERS:
+        _FINGERS[key] = _finger_boxes(opening, flip)
+    return _FINGERS[key]
+
+
+def _grasps(mesh):
+    """Candidate grasps of a part in its own frame: (closing axis (3,), along-face axis (3,),
+    position on the mid-plane (3,) at the fingertips' height, jaw opening, wrist side)."""
+    out = []
+    for (ax, ay), width, tips, us in FACES.get(mesh, []):
+        a = np.array([ax, ay, 0.0]) / np.hypot(ax, ay)
+        b = np.array([-a[1], a[0], 0.0])
+        for tip in tips:
+            for u in us:
+                for flip in (1.0, -1.0):
+                    out.append((a, b, u * b + [0.0, 0.0, tip], width + 2 * OPENING, flip))
+    return out
+
+
+GRASPS = {k: _grasps(k) for k in PIECES}
+
 
 def _rz(yaw):
     c, s = np.cos(yaw), np.sin(yaw)
@@ -305,19 +387,101 @@ class _World:
         return not unstable_objects(_records(self.poses, self.mesh), SHAPES, contact_tol=0.002)
 
 
-def _hangs_over(world, i):
-    """Parts lying entirely above part i whose footprint overlaps it (the gripper comes from
-    above, so they must go first)."""
-    mesh, poses = world.mesh, world.poses
-    top = _lowest(mesh[i], poses[i]) + _height(mesh[i], poses[i])
-    fi = _footprint(mesh[i], poses[i])
+def _grip_blockers(world, i, T, grasp):
+    """Parts of `world` (other than i) that the gripper holding part i at pose T by `grasp`
+    would touch; [] when it has room."""
+    a, b, p, opening, flip = grasp
+    R = T[:3, :3]
+    G = np.eye(4)
+    G[:3, 0], G[:3, 1] = R @ a, R @ b
+    G[:3, 3] = R @ p + T[:3, 3]
+    fingers = _fingers(opening, flip)
+    lo = G[:3, 3] - [0.13, 0.13, 0.0]
+    hi = G[:3, 3] + [0.13, 0.13, 1.0]
     out = []
-    for j in sorted(poses):
-        if j == i or _lowest(mesh[j], poses[j]) < top - 0.002:
+    for j, U in sorted(world.poses.items()):
+        if j == i:
             continue
-        if _outline_gap(fi, _footprint(mesh[j], poses[j])) < -0.002:
+        _, _, lo_j, hi_j = _geometry(world.mesh[j], U)
+        if np.any(lo_j > hi) or np.any(hi_j < lo):
+            continue
+        if separation(fingers, G, SHAPES[world.mesh[j]], U, cutoff=0.0)[0] < 0.0:
             out.append(j)
     return out
+
+
+def _pickable(world, i):
+    """Whether some grasp of part i has room where it stands."""
+    return any(
+        not _grip_blockers(world, i, world.poses[i], g) for g in GRASPS.get(world.mesh[i], [])
+    )
+
+
+def _above(world, i, T):
+    """Parts over part i if it were at pose T (see `_hangs_over`)."""
+    return _hangs_over(world, i, T)
+
+
+def _takes_grasp(world, after, i, T, movers):
+    """Parts of `movers` near pose T that can be picked in `world` but not once part i is at T."""
+    lo, hi = _geometry(world.mesh[i], T)[2] - 0.12, _geometry(world.mesh[i], T)[3] + 0.12
+    out = []
+    for j in movers:
+        if j == i:
+            continue
+        _, _, lo_j, hi_j = _geometry(world.mesh[j], world.poses[j])
+        if np.any(lo_j > hi) or np.any(hi_j < lo):
+            continue
+        if _pickable(world, j) and not _pickable(after, j):
+            out.append(j)
+    return out
+
+
+def _move_blockers(world, i, T_to, after):
+    """None when part i can be carried from where it is in `world` to `T_to` (leaving
+    `after`) by one grasp that has room at both ends; else the parts in the way, most often
+    first."""
+    count = {}
+    for grasp in GRASPS.get(world.mesh[i], []):
+        hit = _grip_blockers(world, i, world.poses[i], grasp)
+        hit = hit or _grip_blockers(after, i, T_to, grasp)
+        if not hit:
+            return None
+        for j in hit:
+            count[j] = count.get(j, 0) + 1
+    return sorted(count, key=lambda j: (-count[j], j))
+
+
+def _hangs_over(world, i, T=None):
+    """Parts with a piece above part i (at its pose, or at T) whose outline overlaps it: the
+    part rises and comes down vertically, so they must go first (the slab over an arch's
+    opening hangs over whatever stands in the opening)."""
+    mesh, poses = world.mesh, world.poses
+    T = poses[i] if T is None else T
+    top = _geometry(mesh[i], T)[3][2]
+    fi = _footprint(mesh[i], T)
+    out = []
+    for j in sorted(poses):
+        if j == i or _geometry(mesh[j], poses[j])[3][2] < top - 0.002:
+            continue
+        for lo, hull in _pieces(mesh[j], poses[j]):
+            if lo >= top - 0.002 and _outline_gap(fi, hull) < -0.002:
+                out.append(j)
+                break
+    return out
+
+
+def _pieces(mesh, T):
+    """Lowest point and outline from above of every convex piece of a posed part, cached."""
+    key = (mesh, "pieces", np.asarray(T, dtype=float).tobytes())
+    got = _GEOMETRY.get(key)
+    if got is None:
+        got = []
+        for p in SHAPES[mesh].pieces:
+            w = p @ T[:3, :3].T + T[:3, 3]
+            got.append((float(w[:, 2].min()), w[ConvexHull(w[:, :2]).vertices, :2]))
+        _GEOMETRY[key] = got
+    return got
 
 
 def _outline_gap(a, b):
@@ -368,7 +532,7 @@ def _gaps(hull, others, shifts):
     return out
 
 
-def _temporary(world, i, pending):
+def _temporary(world, i, pending, keep=()):
     """A free place on the table for part i (same orientation), nearest to where it is, with
     room for the fingers around it seen from above (nothing overhangs it either)."""
     mesh = world.mesh[i]
@@ -393,8 +557,11 @@ def _temporary(world, i, pending):
     to_parts = _gaps(hull, others, shifts).min(axis=1, initial=np.inf)
     goals = [_footprint(world.mesh[j], G) for j, G in pending]
     to_goals = _gaps(hull, goals, shifts).min(axis=1, initial=np.inf)
+    to_keep = _gaps(hull, list(keep), shifts).min(axis=1, initial=np.inf)
+    moved = np.linalg.norm(shifts, axis=1) >= 0.02  # a place, not where it stands
     for clearance, goal_clearance in CLEARANCES:
-        ok = inside & (to_parts >= clearance) & (to_goals >= goal_clearance)
+        ok = inside & moved & (to_parts >= clearance) & (to_goals >= goal_clearance)
+        ok &= to_keep >= max(goal_clearance, FINGER_ROOM if clearance >= CLEARANCES[0][0] else 0)
         if ok.any():
             T = T0.copy()
             T[:2, 3] = cand[int(np.argmax(ok))]
@@ -432,6 +599,15 @@ def plan(start_state, goal_state):
             }
     goal_world = _World(target, mesh)
     goal_sup = {i: set(s) for i, s in goal_world.sup.items()}
+    result = _build(start, goal, target, goal_sup, mesh, grip=True)
+    if result["status"] != "ok":  # no order leaves the fingers room: the geometric order
+        result = _build(start, goal, target, goal_sup, mesh, grip=False)
+    return result
+
+
+def _build(start, goal, target, goal_sup, mesh, grip):
+    """Greedy construction (see the module docstring); `grip`: every move must leave the
+    gripper room at both ends."""
     world = _World(start, mesh)
     steps = []
     for _ in range(3 * len(goal) + 2):
@@ -459,7 +635,7 @@ def plan(start_state, goal_state):
             ),
             key=lambda i: (_lowest(mesh[i], target[i]), i),
         )
-        move = None
+        move, in_the_way = None, []
         for i in ready:
             if i in loaded or _hangs_over(world, i):
                 continue
@@ -471,10 +647,22 @@ def plan(start_state, goal_state):
                 continue  # it would slide under a part, or leave something tipping
             if any(i in _hangs_over(after, j) for j in goal if not is_done(j)):
                 continue  # it would hang over a part still to be moved
+            if grip:
+                blockers = _move_blockers(world, i, T, after)
+                if blockers is None:
+                    blockers = _above(world, i, T)  # it comes down vertically
+                if blockers is None or not blockers:
+                    movers = [j for j in goal if not is_done(j)]
+                    blockers = _takes_grasp(world, after, i, T, movers) or None
+                if blockers is not None:  # no room for the fingers, or it would take away
+                    for j in blockers:  # another's grasp: j must go, well away from i
+                        if not is_done(j):
+                            in_the_way.append((j, [world.poses[i], T], mesh[i]))
+                    continue
             move = (i, T)
             break
         if move is None:
-            move = _clear_the_way(world, ready, target, goal_sup, is_done, mesh)
+            move = _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip)
             if isinstance(move, str):
                 return {"status": "infeasible", "reason": move}
         i, T = move
@@ -483,9 +671,12 @@ def plan(start_state, goal_state):
     return {"status": "infeasible", "reason": f"no plan within {len(steps)} moves"}
 
 
-def _clear_the_way(world, ready, target, goal_sup, is_done, mesh):
+def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip):
     """A move of one blocking part to a temporary place, or the reason there is none."""
-    candidates = []
+    keep = {}  # part → outlines it must stay clear of: where the fingers must go
+    for j, poses, m in in_the_way:
+        keep.setdefault(_top_of(world, j), []).extend(_footprint(m, T) for T in poses)
+    candidates = list(keep)
     for i in ready:  # what stands on, over or in the way of a part that could be placed
         if i in world.loaded() or _hangs_over(world, i):
             candidates.append(_top_of(world, i))
@@ -510,10 +701,11 @@ def _clear_the_way(world, ready, target, goal_sup, is_done, mesh):
             continue
         seen.append(b)
         pending = [(i, target[i]) for i in sorted(target) if not is_done(i) and i != b]
-        T = _temporary(world, b, pending)
+        T = _temporary(world, b, pending, keep.get(b, []))
         if T is None:
             continue
-        if world.moved(b, T).stands():
+        after = world.moved(b, T)
+        if after.stands() and not (grip and _move_blockers(world, b, T, after) is not None):
             return (b, T)
     if not seen:
         return "no part can be moved"
