@@ -10,6 +10,13 @@ upright): the relation graphs are not needed, so perception noise in them cannot
 Goal poses are snapped to resting heights and to upright yaw rotations; orientation about the
 vertical is kept from the goal (cube rows and pyramids need it to fit). A goal that no plan can
 reach (floating or interpenetrating cubes, unknown ids) gives an explicit "infeasible".
+
+The robot is a parallel-jaw gripper (Robotiq 2F-85) coming down from above, so a move is only
+made when some grasp — jaws closing across one pair of the cube's side faces, the wrist on
+either side — has room among the other cubes at the pick and at the place (fingers, couplers,
+gripper base and wrist as boxes), and when it does not take away the last grasp of a cube that
+still has to move. A cube in the fingers' way goes to a temporary place first. When no order
+satisfies that, the plan falls back to the geometric order alone.
 """
 
 import numpy as np
@@ -30,6 +37,15 @@ REACH = 0.71
 GRID = 0.01  # spacing of candidate temporary places [m]
 CLEARANCE = 0.03  # free gap around a temporary place, for the gripper's fingers [m]
 GOAL_CLEARANCE = 0.012  # gap between a temporary place and goals still to build [m]
+# the gripper: the jaws open this much beyond the cube on each side; the fingertips come 3 mm
+# above whatever the cube stands on; boxes (beyond the pad face [m], half width along the
+# face [m], height above the fingertips [m]) of the fingers, couplers and base, and the
+# wrist (FR3 link 7) leaning to one side of the hand, all kept GRIP_MARGIN from the neighbours
+OPENING = 0.006
+TIP_HEIGHT = 0.003
+GRIP_MARGIN = 0.002
+FINGER_BOXES = ((0.0, 0.017, 0.012, 0.0, 0.04), (0.0, 0.033, 0.017, 0.04, 0.06))
+COUPLER_REACH = 0.064  # the couplers reach this far from the hand's centre line [m]
 
 
 def _yaw(R):
@@ -134,8 +150,8 @@ def _snap_goal(goal):
 def _column_free(i, p, current):
     """Nothing but i occupies the column at and above goal pose p."""
     for j, q in current.items():
-        if j != i and q[2] > p[2] - SIDE + 0.002 and _footprint_gap(p, q) < -0.001:
-            return False
+        if j != i and q[2] > p[2] - SIDE + 0.002 and _footprint_gap(p, q) < -0.0003:
+            return False  # (the cube comes down vertically: even a sliver overhanging it)
     return True
 
 
@@ -149,7 +165,108 @@ def _top_of(j, current):
         j = above[0]
 
 
-def _temporary(i, current, pending):
+def _rect(centre, a, b, a_range, b_range):
+    """Corners (4, 2) of the box a_range × b_range of the hand's frame (a, b unit (2,))."""
+    (a0, a1), (b0, b1) = a_range, b_range
+    return np.array([centre + u * a + v * b for u, v in ((a0, b0), (a1, b0), (a1, b1), (a0, b1))])
+
+
+def _hand_boxes(p, axis, flip):
+    """The gripper holding cube p = (x, y, z, yaw) across its faces along body `axis` (0: x,
+    1: y), wrist on side `flip`: [(corners (4, 2), z_lo, z_hi)] in the world [m]."""
+    yaw = p[3] + axis * np.pi / 2
+    a = np.array([np.cos(yaw), np.sin(yaw)])
+    b = np.array([-a[1], a[0]])
+    g = HALF + OPENING
+    tip = p[2] - HALF + TIP_HEIGHT
+    m = GRIP_MARGIN
+    boxes = []
+    for side in (1.0, -1.0):
+        coupler = (0.0, max(0.0315, COUPLER_REACH - g), 0.02, 0.06, 0.12)
+        for d0, d1, w, z0, z1 in (*FINGER_BOXES, coupler):
+            a_range = sorted((side * (g + d0 - m), side * (g + d1 + m)))
+            boxes.append((_rect(p[:2], a, b, a_range, (-w - m, w + m)), tip + z0 - m, tip + z1))
+    boxes.append(
+        (
+            _rect(p[:2], a, b, (-0.038 - m, 0.038 + m), (-0.038 - m, 0.038 + m)),
+            tip + 0.12,
+            tip + 0.16,
+        )
+    )
+    wrist_a = sorted((flip * (-0.042 - m), flip * (0.082 + m)))
+    wrist_b = sorted((flip * (-0.082 - m), flip * (0.042 + m)))
+    boxes.append((_rect(p[:2], a, b, wrist_a, wrist_b), tip + 0.16, tip + 0.6))
+    return boxes
+
+
+def _polygon_gap(P, Q):
+    """Separation [m] of two convex polygons (negative: overlap), separating-axis test."""
+    best = -np.inf
+    for poly in (P, Q):
+        e = np.roll(poly, -1, axis=0) - poly
+        for n in np.stack([e[:, 1], -e[:, 0]], axis=1):
+            n = n / np.linalg.norm(n)
+            pa, pb = P @ n, Q @ n
+            best = max(best, pa.min() - pb.max(), pb.min() - pa.max())
+    return best
+
+
+def _in_the_hand(i, p, cubes):
+    """Per grasp of cube i at p: the cubes of `cubes` ({id: pose}) the gripper would touch."""
+    out = []
+    for axis in (0, 1):
+        for flip in (1.0, -1.0):
+            boxes = _hand_boxes(p, axis, flip)
+            hit = []
+            for j, q in sorted(cubes.items()):
+                if j == i or np.hypot(*(q[:2] - p[:2])) > 0.2:
+                    continue
+                corners = _corners(q)
+                for rect, z0, z1 in boxes:
+                    if q[2] + HALF > z0 and q[2] - HALF < z1 and _polygon_gap(rect, corners) < 0:
+                        hit.append(j)
+                        break
+            out.append(hit)
+    return out
+
+
+def _room(i, p, cubes):
+    """Whether some grasp of cube i at p has room among `cubes`."""
+    return any(not hit for hit in _in_the_hand(i, p, cubes))
+
+
+def _move_blockers(i, p, current):
+    """[] when cube i can be carried from where it is to p (the others staying as in
+    `current`) with room for the gripper at both ends; else the cubes in the way, most often
+    hit first (the cube's symmetry lets any grasp at the pick meet any grasp at the place)."""
+    after = dict(current)
+    after[i] = p
+    count = {}
+    for cubes, q in ((current, current[i]), (after, p)):
+        hits = _in_the_hand(i, q, cubes)
+        if any(not h for h in hits):
+            continue
+        for h in hits:
+            for j in h:
+                count[j] = count.get(j, 0) + 1
+    return sorted(count, key=lambda j: (-count[j], j))
+
+
+def _takes_grasp(i, p, current, movers):
+    """Cubes of `movers` that can be picked now but not once cube i is at p."""
+    after = dict(current)
+    after[i] = p
+    return [
+        j
+        for j in movers
+        if j != i
+        and np.hypot(*(current[j][:2] - p[:2])) < 0.2
+        and _room(j, current[j], current)
+        and not _room(j, current[j], after)
+    ]
+
+
+def _temporary(i, current, pending, grip=False, movers=()):
     """A free place on the table for cube i, as near as possible to where it is."""
     here = current[i]
     others = [q for j, q in current.items() if j != i]
@@ -157,14 +274,21 @@ def _temporary(i, current, pending):
     ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - here[:2], axis=1), kind="stable")
-    for clearance, goal_clearance in ((CLEARANCE, GOAL_CLEARANCE), (0.015, 0.005), (0.008, 0.0)):
+    levels = ((CLEARANCE, GOAL_CLEARANCE), (0.015, 0.005), (0.008, 0.0))
+    if grip:  # keep goals still to build free for the fingers on every side first
+        levels = ((CLEARANCE, CLEARANCE), *levels)
+    for clearance, goal_clearance in levels:
         for k in order:
             p = np.array([cand[k][0], cand[k][1], HALF, here[3]])
+            if np.hypot(*(p[:2] - here[:2])) < 0.02:
+                continue  # a place, not where it stands
             if not _in_region(p[:2]) or not all(_in_region(c) for c in _corners(p)):
                 continue
             if any(_footprint_gap(p, q) < clearance for q in others):
                 continue
             if any(_footprint_gap(p, g) < goal_clearance for g in pending):
+                continue
+            if grip and (_move_blockers(i, p, current) or _takes_grasp(i, p, current, movers)):
                 continue
             return p
     return None
@@ -187,6 +311,15 @@ def plan(start_state, goal_state):
     for i, p in goal.items():
         if not all(_reachable(c) for c in _corners(p)):
             return {"status": "infeasible", "reason": f"'{i}' is out of reach in the goal"}
+    result = _build(start, goal, grip=True)
+    if result["status"] != "ok":  # no order leaves the gripper room: the geometric order
+        result = _build(start, goal, grip=False)
+    return result
+
+
+def _build(start, goal, grip):
+    """Greedy construction (see the module docstring); `grip`: every move must leave the
+    gripper room at both ends and no cube still to move without a grasp."""
     goal_sup = _supporters(goal)
     current = dict(start)
     steps = []
@@ -213,14 +346,27 @@ def plan(start_state, goal_state):
             (i for i in goal if not is_done(i) and all(is_done(j) for j in goal_sup[i])),
             key=lambda i: (goal[i][2], i),
         )
-        move = None
+        movers = [j for j in goal if not is_done(j)]
+        move, in_the_way = None, []
         for i in ready:
             if i not in loaded and _column_free(i, goal[i], current):
+                if grip:
+                    blockers = _move_blockers(i, goal[i], current)
+                    blockers = blockers or _takes_grasp(i, goal[i], current, movers)
+                    if blockers:  # no room for the gripper, or it would take a grasp away
+                        in_the_way += [j for j in blockers if j not in in_the_way]
+                        continue
                 move = (i, goal[i])
                 break
         if move is None:
             blocker = None
-            for i in ready:  # what stands in the way of a cube that could go to its goal
+            for j in sorted(in_the_way, key=lambda j: (is_done(j), j)):
+                if j not in loaded:  # a cube in the fingers' way (not done first)
+                    blocker = j
+                    break
+                blocker = _top_of(j, current)
+                break
+            for i in ready if blocker is None else ():  # what stands in the way of a cube
                 if i in loaded:
                     blocker = _top_of(i, current)
                     break
@@ -240,7 +386,9 @@ def plan(start_state, goal_state):
             if blocker is None:
                 return {"status": "infeasible", "reason": "no cube can be moved"}
             pending = [goal[i] for i in goal if not is_done(i) and i != blocker]
-            place = _temporary(blocker, current, pending)
+            place = _temporary(blocker, current, pending, grip, movers)
+            if place is None and grip:
+                return {"status": "infeasible", "reason": f"no room to put '{blocker}' down"}
             if place is None:
                 return {"status": "infeasible", "reason": f"no free place to put '{blocker}' down"}
             move = (blocker, place)
