@@ -1,0 +1,678 @@
+# Written by people (the RIVET team), not by a model: the hand-written reference `perceive`
+# for the assembly domain, the level a model's program should reach. It uses numpy, scipy, cv2,
+# trimesh and the toolbox's exact polyhedral geometry (toolbox.stability).
+"""perceive(observation, meshes, camera) -> records: the 6D poses of the parts in one RGB-D image.
+
+1. Colour: every part has its own hue; pixels are labelled by the nearest catalogue hue
+   (saturated pixels only: the table and the shadows are grey), and thin lines of blended
+   colour along silhouettes are opened away.
+2. Hypotheses: a part rests in one of its stable poses (`toolbox.stable_poses`: the faces of
+   its hull it can stand on), turned about the vertical. For each part, the resting pose it is
+   built to stand in is tried first, from eight headings; its pose (x, y, z, yaw) is fitted by
+   visibility-aware point-to-plane ICP: every observed point is matched to the nearest model
+   surface point that faces the camera, so the visible front of a part is never matched to its
+   hidden back. Other resting poses are tried only when the first fits badly.
+3. Scoring by rendering: a hypothesis is judged by how well it explains its points and by
+   what its camera-facing surface would hide — projected into the image, it must not lie in
+   front of surfaces the camera sees behind it. Surface behind nearer objects is excused, so
+   partly occluded parts are fitted from what shows.
+4. Physics: parts are settled lowest first onto the table or onto the parts under them (exact
+   convex-piece geometry, `toolbox.separation`), side-by-side overlaps from noise are pushed
+   apart, and a part that would float or tip over must stand on something the camera cannot
+   see: an unseen part of the right height is put under it (mirroring the visible one for a
+   beam or an arch on two pillars). A part that is not seen and not needed to hold anything up
+   is left out: it is reported missing rather than invented.
+"""
+
+import hashlib
+
+import cv2
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
+
+PARTS = {  # id → (mesh key, hue of its colour as rendered [deg])
+    "pillar_1": ("pillar", 4.0),
+    "pillar_2": ("pillar", 32.0),
+    "beam": ("beam", 224.0),
+    "arch": ("arch", 51.0),
+    "roof": ("roof", 131.0),
+    "cylinder": ("cylinder", 277.0),
+    "lblock": ("lblock", 185.0),
+    "block": ("block", 335.0),
+}
+HUE_TOL = 11.0  # [deg]
+SAT_MIN = 0.3
+VAL_MIN = 0.1
+MIN_PIXELS = 25  # fewer labelled pixels: the part is not seen
+WEAK_PIXELS = 400  # fewer: its fit may be moved to where physics needs it
+COARSE_POINTS = 80
+FINE_POINTS = 200
+SAMPLE_EDGE = 0.004  # model surface sampling [m]
+TRUNCATE = 0.006  # residuals beyond this count as outliers [m]
+SEEN_THROUGH = 0.008  # model surface this far in front of what the camera sees [m]
+GRAZING = 0.25  # cosine between a surface and the view ray below which it is not judged
+VIOLATION_WEIGHT = 0.02  # [m] per unit fraction of model surface seen through
+VIOLATION_SEARCH = 0.0005  # [m] of score from free space above which a pose is slid clear
+POOR_FIT = 0.0015  # [m] mean distance above which a pose is searched around
+BAD_FIT = 0.004  # mean residual [m] above which other resting poses are tried
+OTHER_POSE_PENALTY = 0.0015  # [m] prior for the part's own upright pose
+SETTLE_RANGE = 0.03  # a part may drop or rise this much onto its support [m]
+SETTLE_TOL = 0.01  # moving a part farther than this onto its support is suspect [m]
+CONTEXT_SCORE = 0.0015  # a worse score: try the part where its neighbours suggest [m]
+CONFLICT_DEPTH = 0.003  # parts interpenetrating deeper cannot both be right [m]
+ALTERNATIVES = 5  # hypotheses weighed for a part in conflict
+ALTERNATIVE_MARGIN = 0.003  # how much worse [m] an alternative may explain the image
+WIDE_ANCHORS = 5
+TIE = 0.0003  # hypotheses this close [m] explain the image equally well
+SLIDE_STEP = 0.004  # [m]
+FINE_ITERATIONS = 8
+GRID_CELL = 0.0025  # [m]
+GRID_MARGIN = 0.025  # [m]
+NEIGHBOURS = 6
+
+_CACHE = {}
+
+
+def _key(mesh):
+    v = np.ascontiguousarray(np.asarray(mesh.vertices, dtype=np.float64))
+    f = np.ascontiguousarray(np.asarray(mesh.faces, dtype=np.int64))
+    return hashlib.sha1(v.tobytes() + f.tobytes()).hexdigest()
+
+
+class _Model:
+    """A mesh prepared for fitting: surface samples with normals, resting poses, shape."""
+
+    def __init__(self, mesh):
+        v, f = trimesh.remesh.subdivide_to_size(
+            np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int), SAMPLE_EDGE
+        )
+        tri = v[f]
+        self.samples = tri.mean(axis=1)  # (m, 3) object frame
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        self.normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        # nearest samples of every cell of a grid around the part: a lookup instead of a
+        # tree query in the inner loop of the fit
+        lo = self.samples.min(axis=0) - GRID_MARGIN
+        shape = np.ceil((self.samples.max(axis=0) + GRID_MARGIN - lo) / GRID_CELL).astype(int)
+        axes = [lo[a] + (np.arange(shape[a]) + 0.5) * GRID_CELL for a in range(3)]
+        centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        _, near = cKDTree(self.samples).query(centres, k=NEIGHBOURS)
+        self.grid_lo, self.grid_shape = lo, shape
+        self.grid = near.reshape(-1, NEIGHBOURS).astype(np.int64)  # cells in C order
+        self.shape = Shape.from_mesh(mesh)
+        rests = stable_poses(self.shape)
+        # the part's own upright pose first, then the others steadiest first
+        rests.sort(key=lambda p: (not np.allclose(p.rotation, np.eye(3), atol=1e-6),))
+        self.rests = [p.rotation for p in rests] or [np.eye(3)]
+        pts = np.concatenate(self.shape.pieces)
+        self.extent = np.ptp(pts, axis=0)
+        self.centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
+        self.lowest = {k: float((pts @ R.T)[:, 2].min()) for k, R in enumerate(self.rests)}
+        self.highest = {k: float((pts @ R.T)[:, 2].max()) for k, R in enumerate(self.rests)}
+        step = max(1, len(self.samples) // 400)
+        self.probe = np.arange(0, len(self.samples), step)  # samples used for visibility
+
+
+def _model(mesh):
+    k = _key(mesh)
+    if k not in _CACHE:
+        _CACHE[k] = _Model(mesh)
+    return _CACHE[k]
+
+
+def _rz(yaw):
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _pose(R, t):
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+# -- colour --------------------------------------------------------------------------------
+
+
+def _labels(rgb):
+    """Per-pixel part index into PARTS (-1: not a part)."""
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV_FULL)
+    ok = (hsv[..., 1] >= SAT_MIN * 255) & (hsv[..., 2] >= VAL_MIN * 255)
+    labels = np.full(rgb.shape[:2], -1, dtype=np.int32)
+    v, u = np.nonzero(ok)
+    h = hsv[v, u, 0].astype(np.float32) * (360.0 / 256.0)
+    hues = np.array([hue for _, hue in PARTS.values()], dtype=np.float32)
+    d = np.abs((h[:, None] - hues + 180.0) % 360.0 - 180.0)
+    best = np.argmin(d, axis=1)
+    near = d[np.arange(len(h)), best] <= HUE_TOL
+    labels[v[near], u[near]] = best[near]
+    return labels
+
+
+def _mask(labels, k):
+    raw = (labels == k).astype(np.uint8)
+    if raw.sum() < MIN_PIXELS:
+        return None, int(raw.sum())
+    opened = cv2.morphologyEx(raw, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    if opened.sum() < MIN_PIXELS:  # barely visible: keep what is not a one-pixel line
+        opened = cv2.morphologyEx(raw, cv2.MORPH_OPEN, cv2.getStructuringElement(0, (2, 2)))
+    if opened.sum() < MIN_PIXELS:
+        return None, int(raw.sum())
+    eroded = cv2.erode(opened, np.ones((3, 3), np.uint8))
+    mask = eroded if eroded.sum() >= 4 * MIN_PIXELS else opened
+    return mask.astype(bool), int(opened.sum())
+
+
+def _points(mask, depth, camera, n_max):
+    K = np.asarray(camera["K"], dtype=float)
+    T = np.asarray(camera["T_world_camera"], dtype=float)
+    v, u = np.nonzero(mask & (depth > 0))
+    if len(u) > n_max:  # an even, deterministic subsample
+        keep = np.linspace(0, len(u) - 1, n_max).round().astype(int)
+        u, v = u[keep], v[keep]
+    z = depth[v, u].astype(float)
+    cam = np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
+    return cam @ T[:3, :3].T + T[:3, 3]
+
+
+def _inliers(pts, size):
+    """Drop points far from the bulk (mislabelled pixels elsewhere in the image)."""
+    if len(pts) < 10:
+        return pts
+    med = np.median(pts, axis=0)
+    keep = np.linalg.norm(pts - med, axis=1) <= 0.75 * size + 0.01
+    return pts[keep] if keep.sum() >= 10 else pts
+
+
+# -- fitting --------------------------------------------------------------------------------
+
+
+def _match(model, R, t, pts, eye):
+    """Model samples (world) and normals matched to the points, facing the camera; weights and
+    distances [m]."""
+    q = (pts - t) @ R  # object frame
+    cell = ((q - model.grid_lo) * (1.0 / GRID_CELL)).astype(np.int64)
+    np.clip(cell, 0, model.grid_shape - 1, out=cell)
+    idx = model.grid[
+        (cell[:, 0] * model.grid_shape[1] + cell[:, 1]) * model.grid_shape[2] + cell[:, 2]
+    ]
+    view = (eye - pts) @ R  # towards the camera, object frame
+    nrm = model.normals[idx]  # (n, k, 3)
+    facing = (
+        nrm[..., 0] * view[:, :1] + nrm[..., 1] * view[:, 1:2] + nrm[..., 2] * view[:, 2:]
+    ) > 0
+    diff = model.samples[idx] - q[:, None, :]
+    d2 = (diff * diff).sum(axis=2) + ~facing  # a sample turned away only when no other is near
+    first = d2.argmin(axis=1)
+    rows = np.arange(len(pts))
+    j = idx[rows, first]
+    ok = facing[rows, first]
+    w = np.where(ok, 1.0, 0.2)
+    dist = np.sqrt(np.maximum(d2[rows, first] - ~ok, 0.0))
+    return model.samples[j] @ R.T + t, model.normals[j] @ R.T, w, dist
+
+
+def _icp(model, k, params, pts, eye, iterations):
+    """Point-to-plane Gauss–Newton on (x, y, z, yaw) in resting pose k; the part never sinks
+    into the table."""
+    R0 = model.rests[k]
+    floor = -model.lowest[k] - 0.002
+    x = np.array(params, dtype=float)
+    x[2] = max(x[2], floor)
+    for _ in range(iterations):
+        R = _rz(x[3]) @ R0
+        c, n, w, _ = _match(model, R, x[:3], pts, eye)
+        r = np.einsum("ij,ij->i", n, pts - c)
+        w = w * np.minimum(1.0, TRUNCATE / np.maximum(np.abs(r), 1e-9))
+        w = np.where(np.linalg.norm(pts - c, axis=1) > 3 * TRUNCATE, 0.0, w)
+        arm = c - x[:3]
+        J = np.c_[-n, -(n[:, 1] * arm[:, 0] - n[:, 0] * arm[:, 1])]  # d r / d (x, y, z, yaw)
+        A = (J * w[:, None]).T @ J + np.diag([1e-3, 1e-3, 1e-2, 1e-4]) * max(w.sum(), 1.0) * 1e-3
+        b = -(J * w[:, None]).T @ r
+        step = np.linalg.solve(A, b)
+        step[:3] = np.clip(step[:3], -0.02, 0.02)
+        step[3] = np.clip(step[3], -0.3, 0.3)
+        x += step
+        x[2] = max(x[2], floor)
+        if np.abs(step[:3]).max() < 2e-5 and abs(step[3]) < 1e-4:
+            break
+    return x
+
+
+def _score(model, R0, x, pts, eye, view):
+    """Lower is better: mean truncated distance of the points to the facing model surface, plus
+    the share of the model's camera-facing surface that would hide what the camera sees."""
+    R = _rz(x[3]) @ R0
+    _, _, w, d = _match(model, R, x[:3], pts, eye)
+    fit = float(np.mean(np.minimum(d, TRUNCATE) * np.where(w < 1, 1.5, 1.0)))
+    s = model.samples[model.probe] @ R.T + x[:3]
+    n = model.normals[model.probe] @ R.T
+    ray = eye - s
+    cos = np.einsum("ij,ij->i", n, ray) / np.linalg.norm(ray, axis=1)
+    s = s[cos > GRAZING]  # faces seen at a grazing angle fall on their neighbours' pixels
+    depth, K, R_cw, t_cw = view
+    cam = s @ R_cw.T + t_cw
+    z = cam[:, 2]
+    u = np.round(K[0, 0] * cam[:, 0] / z + K[0, 2]).astype(int)
+    v = np.round(K[1, 1] * cam[:, 1] / z + K[1, 2]).astype(int)
+    h, wd = depth.shape
+    inside = (z > 0) & (u >= 0) & (u < wd) & (v >= 0) & (v < h)
+    seen = depth[np.clip(v, 0, h - 1), np.clip(u, 0, wd - 1)]
+    valid = inside & (seen > 0)
+    through = valid & (seen > z + SEEN_THROUGH)
+    violation = through.sum() / max(int(inside.sum()), 1)  # beyond the image: no evidence
+    return fit + VIOLATION_WEIGHT * violation, fit
+
+
+def _visible_centre(model, R, t, view):
+    """Mean (object frame) of the model samples the camera would see at pose (R, t): facing
+    it, inside the image and in front of the part's own other surfaces (a z-buffer at a quarter
+    resolution)."""
+    depth, K, R_cw, t_cw = view
+    s = model.samples[model.probe]
+    w = s @ R.T + t
+    eye = -R_cw.T @ t_cw
+    cam = w @ R_cw.T + t_cw
+    u = (K[0, 0] * cam[:, 0] / cam[:, 2] + K[0, 2]) / 4
+    v = (K[1, 1] * cam[:, 1] / cam[:, 2] + K[1, 2]) / 4
+    front = np.einsum("ij,ij->i", model.normals[model.probe] @ R.T, eye - w) > 0
+    front &= (u >= 0) & (v >= 0) & (u < depth.shape[1] / 4) & (v < depth.shape[0] / 4)
+    s, cam, u, v = s[front], cam[front], u[front].astype(np.int64), v[front].astype(np.int64)
+    if len(s) == 0:
+        return np.zeros(3)
+    key = (u - u.min()) * 100000 + (v - v.min())
+    order = np.lexsort((cam[:, 2], key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    return s[order[first]].mean(axis=0)
+
+
+class _Part:
+    """One seen part: its points and its pose hypotheses, refined on demand, best first."""
+
+    def __init__(self, name, model, pts, pixels, eye, view):
+        self.name, self.model, self.pts, self.pixels = name, model, pts, pixels
+        self.eye, self.view = eye, view
+        xy = pts[:, :2] - pts[:, :2].mean(axis=0)
+        _, evecs = np.linalg.eigh(xy.T @ xy)
+        self.heading = float(np.arctan2(evecs[1, 1], evecs[0, 1]))
+        self.coarse = pts[
+            np.linspace(0, len(pts) - 1, min(len(pts), COARSE_POINTS)).round().astype(int)
+        ]
+        self.tries = []  # (coarse score, rest, heading, shift, x), per resting pose on demand
+        self.rests_tried = 0
+        self.wide = False
+        self.refined = set()
+        self.hyps = []  # (score, fit, R, t) refined, best first
+        self._search(0)
+        self.refine(2)
+        if len(self.hyps) > 1 and self.hyps[1][0] < self.hyps[0][0] + 0.0003:
+            self.refine(3)  # undecided: weigh one more
+        if self.hyps[0][1] > BAD_FIT:  # fits badly: it may rest on another face
+            for k in range(1, len(model.rests)):
+                self._search(k)
+            self.refine(2)
+
+    def _search(self, k):
+        """Coarse ICP from eight headings (and offsets along long parts) in resting pose k."""
+        model, pts, R0 = self.model, self.pts, self.model.rests[k]
+        centre = pts.mean(axis=0)
+        top = float(np.percentile(pts[:, 2], 97))
+        length = float(np.ptp((np.concatenate(model.shape.pieces) @ R0.T)[:, 0]))
+        shifts = (0.0, -length / 4, length / 4) if length > 0.06 else (0.0,)
+        starts = []
+        for j in range(8):
+            yaw = self.heading + j * np.pi / 4
+            R = _rz(yaw) @ R0
+            t = centre - R @ _visible_centre(model, R, centre - R @ model.centre, self.view)
+            t[2] = top - model.highest[k]  # the top shows from above, even when cut off
+            for n, shift in enumerate(shifts):  # partly hidden long parts: along their length
+                t1 = t + shift * R[:, 0] * [1, 1, 0] / max(np.linalg.norm(R[:2, 0]), 1e-9)
+                x = np.array([t1[0], t1[1], t1[2], yaw])
+                d = _match(model, R, t1, self.coarse, self.eye)[3]
+                starts.append((float(np.mean(np.minimum(d, 3 * TRUNCATE))), j, n, x))
+        starts.sort(key=lambda t: t[:3])
+        keep = [next(t for t in starts if t[1] == j) for j in range(8)]  # every heading
+        for _, j, n, x in keep:  # from its offset nearest to the points
+            x = _icp(model, k, x, self.coarse, self.eye, 4)
+            score = _score(model, R0, x, self.coarse, self.eye, self.view)[0]
+            self.tries.append((score + OTHER_POSE_PENALTY * (k > 0), k, j, n, x))
+        self.tries.sort(key=lambda t: t[:4])
+        self.rests_tried = k + 1
+
+    def search_wide(self):
+        """For a part in conflict with its neighbours: sixteen headings, and what it shows
+        aligned with several points of its top in turn (a small patch of an occluded part can
+        be any piece of it)."""
+        if self.wide:
+            return
+        self.wide = True
+        model, R0 = self.model, self.model.rests[0]
+        up = model.samples[model.probe][(model.normals[model.probe] @ R0.T)[:, 2] > 0.5]
+        if len(up) < WIDE_ANCHORS:
+            up = model.samples[model.probe]
+        anchors = [up[np.argmin(np.linalg.norm(up[:, :2] - model.centre[:2], axis=1))]]
+        for _ in range(WIDE_ANCHORS - 1):  # farthest point sampling
+            d = np.min([np.linalg.norm(up - a, axis=1) for a in anchors], axis=0)
+            anchors.append(up[int(np.argmax(d))])
+        centre = self.pts.mean(axis=0)
+        for j in range(16):
+            yaw = self.heading + (j + 0.5) * np.pi / 8
+            R = _rz(yaw) @ R0
+            for n, a in enumerate(anchors):
+                t = centre - R @ a
+                x = _icp(model, 0, [t[0], t[1], t[2], yaw], self.coarse, self.eye, 4)
+                score = _score(model, R0, x, self.coarse, self.eye, self.view)[0]
+                self.tries.append((score, 0, 100 + j, n, x))
+        self.tries.sort(key=lambda t: t[:4])
+
+    def refine(self, n):
+        """Refine coarse hypotheses until n distinct ones exist (or none are left)."""
+        for _, k, j, m, x in self.tries:
+            if len(self.hyps) >= n:
+                break
+            if (k, j, m) in self.refined:
+                continue
+            self.refined.add((k, j, m))
+            self.add(k, _icp(self.model, k, x, self.pts, self.eye, FINE_ITERATIONS))
+
+    def add(self, k, x):
+        R0 = self.model.rests[k]
+        score, fit = _score(self.model, R0, x, self.pts, self.eye, self.view)
+        if score - fit > VIOLATION_SEARCH or fit > POOR_FIT:
+            # hides what the camera sees, or explains it poorly: ICP only sees the points
+            # near the model, which a face sliding along itself explains equally well
+            x, score, fit = self._slide(R0, x, score, fit)
+        score += OTHER_POSE_PENALTY * (k > 0)
+        R = _rz(x[3]) @ R0
+        for _, _, R1, t1 in self.hyps:
+            if np.linalg.norm(t1 - x[:3]) < 0.004 and np.trace(R1.T @ R) > 1 + 2 * np.cos(0.08):
+                return
+        self.hyps.append((score, fit, R, x[:3].copy()))
+        self.hyps.sort(key=lambda h: h[0])
+
+    def _slide(self, R0, x, score, fit):
+        """Pattern search on the full score (points and free space) around x."""
+        steps = np.array([0.008, 0.008, 0.0, np.radians(4.0)])
+        for _ in range(24):
+            moved = False
+            for d in range(4):
+                if steps[d] == 0:
+                    continue
+                for sign in (1.0, -1.0):
+                    y = x.copy()
+                    y[d] += sign * steps[d]
+                    sc, ft = _score(self.model, R0, y, self.pts, self.eye, self.view)
+                    if sc < score - 1e-7:
+                        x, score, fit, moved = y, sc, ft, True
+                        break
+            if not moved:
+                steps = steps / 2
+                if steps[0] < 0.0005:
+                    break
+        return x, score, fit
+
+    def slide_under(self, h, coms, masses):
+        """The hypothesis h moved along the part's length to where the joint centre of mass of
+        its load is best centred, among the positions explaining the image as well as h."""
+        model, R = self.model, h[2]
+        u = R[:, 0] * [1.0, 1.0, 0.0]
+        if np.linalg.norm(u) < 0.5:
+            return h
+        u /= np.linalg.norm(u)
+        k = next(
+            (
+                k
+                for k, R0 in enumerate(model.rests)
+                if np.allclose(R0, _rz(-np.arctan2(R[1, 0], R[0, 0])) @ R, atol=1e-6)
+            ),
+            0,
+        )
+        length = float(np.ptp((np.concatenate(model.shape.pieces) @ model.rests[k].T)[:, 0]))
+        yaw = float(np.arctan2(R[1, 0], R[0, 0]))
+        load = np.average(np.array(coms)[:, :2], axis=0, weights=masses)
+        rows = []
+        for d in np.arange(-length / 2, length / 2 + 1e-9, SLIDE_STEP):
+            best_here = None
+            for turn in np.radians([0.0, -2.0, 2.0, -4.0, 4.0]):  # the far end swings
+                x = np.array([*(h[3] + d * u), yaw + turn])
+                sc = _score(model, model.rests[k], x, self.pts, self.eye, self.view)
+                if best_here is None or sc[0] < best_here[0][0]:
+                    best_here = (sc, d, x)
+            rows.append(best_here)
+        best = min(r[0][0] for r in rows)
+        if best > h[0] + TIE:
+            return h
+        centre = R @ model.shape.centre_of_mass
+        fits = [r for r in rows if r[0][0] <= best + TIE]
+        (score, fit), _, x = min(
+            fits, key=lambda r: (abs((r[2][:2] + centre[:2] - load) @ u[:2]), r[1])
+        )
+        if np.linalg.norm(x[:3] - h[3]) < 1e-9 and x[3] == yaw:
+            return h
+        return (score, fit, _rz(x[3]) @ model.rests[k], x[:3])
+
+    def near(self, anchors):
+        """Hypotheses where well-seen neighbours suggest: stacked under or on one, turned like
+        it (a beam under a roof shows only its ends)."""
+        for T in anchors:
+            if np.linalg.norm(T[:2, 3] - self.pts[:, :2].mean(axis=0)) > 0.15:
+                continue
+            yaw0 = float(np.arctan2(T[1, 0], T[0, 0]))
+            z = self.hyps[0][3][2]
+            for k in range(4):
+                x0 = [T[0, 3], T[1, 3], z, yaw0 + k * np.pi / 2]
+                self.add(0, _icp(self.model, 0, x0, self.pts, self.eye, FINE_ITERATIONS))
+
+
+# -- physics -------------------------------------------------------------------------------
+
+
+def _records(poses):
+    return [{"id": i, "mesh": PARTS[i][0], "pose": poses[i]} for i in sorted(poses)]
+
+
+def _lowest(shape, T):
+    pts = np.concatenate(shape.pieces)
+    return float((pts @ T[:3, :3].T + T[:3, 3])[:, 2].min())
+
+
+def _settle(poses, shapes, order, moves=None):
+    """Drop (or lift) each part, lowest first, onto the table or the parts under it; `moves`
+    collects each part's vertical shift [m] and what it landed on."""
+    placed = {}
+    for i in order:
+        T = poses[i].copy()
+        drop, on = _lowest(shapes[i], T), "table"
+        for j, U in placed.items():
+            gap, axis = separation(shapes[i], T, shapes[j], U, cutoff=SETTLE_RANGE)
+            if axis[2] >= 0.7 and -SETTLE_RANGE <= gap < drop:
+                drop, on = gap, j
+        if abs(drop) <= SETTLE_RANGE or drop < 0:
+            T[2, 3] -= drop
+        elif moves is not None:
+            on = None  # floating
+        placed[i] = T
+        if moves is not None:
+            moves[i] = (-drop, on)
+    return placed
+
+
+def _push_apart(poses, shapes, pixels):
+    """Side-by-side overlaps (noise) resolved by moving the less visible part sideways."""
+    ids = sorted(poses)
+    for _ in range(3):
+        moved = False
+        for a in ids:
+            for b in ids:
+                if a >= b:
+                    continue
+                gap, axis = separation(shapes[a], poses[a], shapes[b], poses[b], cutoff=0.0)
+                if gap >= -0.0005 or abs(axis[2]) >= 0.7:
+                    continue
+                weak, sign = (a, 1.0) if pixels.get(a, 0) < pixels.get(b, 0) else (b, -1.0)
+                shift = sign * axis * (-gap + 0.0005)
+                shift[2] = 0.0
+                poses[weak] = poses[weak].copy()
+                poses[weak][:3, 3] += shift
+                moved = True
+        if not moved:
+            break
+    return poses
+
+
+def _hidden_supporters(poses, shapes, models, missing, pixels):
+    """Put unseen parts under parts that would otherwise float or tip over."""
+    missing = list(missing)
+    for _ in range(len(missing)):
+        if not missing:
+            break
+        recs = _records(poses)
+        bad = unstable_objects(recs, shapes, contact_tol=0.003)
+        if not bad:
+            break
+        sup = supports(recs, shapes, contact_tol=0.003)
+        placed = False
+        for i in sorted(bad, key=lambda k: (_lowest(shapes[k], poses[k]), k)):
+            T = poses[i]
+            bottom = _lowest(shapes[i], T)
+            com = T[:3, :3] @ shapes[i].centre_of_mass + T[:3, 3]
+            under = [j for j in sup.get(i, []) if j != "table"]
+            if len(under) == 1:  # one visible supporter: the hidden one mirrors it
+                U = poses[under[0]]
+                xy = 2 * com[:2] - U[:2, 3]
+                yaw = float(np.arctan2(U[1, 0], U[0, 0]))
+            else:
+                xy, yaw = com[:2], float(np.arctan2(T[1, 0], T[0, 0]))
+            for m in sorted(missing, key=lambda k: (k not in [c for c in missing], k)):
+                model = models[m]
+                height = model.highest[0] - model.lowest[0]
+                if abs(height - bottom) > 0.006:
+                    continue
+                poses[m] = _pose(_rz(yaw) @ model.rests[0], [xy[0], xy[1], -model.lowest[0]])
+                pixels[m] = 0
+                missing.remove(m)
+                placed = True
+                break
+            if placed:
+                break
+        if not placed:
+            break
+    return poses
+
+
+def _conflicts(poses, shapes, pixels, missing_heights, moves):
+    """Parts whose pose cannot be right: the less visible of two interpenetrating parts, of a
+    part and what it had to be moved far onto, and a part floating where no unseen part could
+    hold it up."""
+    recs = _records(poses)
+    out = set()
+    for i, (dz, on) in moves.items():
+        if abs(dz) > SETTLE_TOL and on is not None:
+            out.add(i if on == "table" else min((i, on), key=lambda k: (pixels.get(k, 0), k)))
+    for a, b, _ in collisions(recs, shapes, tolerance=CONFLICT_DEPTH):
+        if b != "table":
+            out.add(min((a, b), key=lambda k: (pixels.get(k, 0), k)))
+    sup = supports(recs, shapes, contact_tol=0.003)
+    for i, T in poses.items():
+        bottom = _lowest(shapes[i], T)
+        if not sup[i] and not any(abs(h - bottom) < 0.006 for h in missing_heights):
+            out.add(i)
+    return out
+
+
+def _choose(parts, shapes, missing_heights):
+    """One hypothesis per part, physically consistent where the image allows."""
+    pixels = {i: p.pixels for i, p in parts.items()}
+    anchors = [_pose(p.hyps[0][2], p.hyps[0][3]) for p in parts.values()]
+    for i in sorted(parts):
+        if parts[i].hyps[0][0] > CONTEXT_SCORE:
+            parts[i].near([T for T in anchors if not np.allclose(T[:3, 3], parts[i].hyps[0][3])])
+    choice = {i: p.hyps[0] for i, p in parts.items()}  # (score, fit, R, t)
+
+    def posed(ch):
+        poses = {i: _pose(h[2], h[3]) for i, h in ch.items()}
+        moves = {}
+        order = sorted(poses, key=lambda i: (_lowest(shapes[i], poses[i]), i))
+        poses = _settle(poses, shapes, order, moves)
+        return poses, _conflicts(poses, shapes, pixels, missing_heights, moves)
+
+    poses, conflicts = posed(choice)
+    tried = set()
+    for _ in range(2 * len(parts)):
+        bad = sorted(conflicts - tried)
+        if not bad:
+            break
+        i = min(bad, key=lambda k: (pixels[k], k))
+        tried.add(i)
+        part = parts[i]
+        part.search_wide()
+        part.refine(len(part.hyps) + ALTERNATIVES)
+        if part.rests_tried < len(part.model.rests):
+            for k in range(part.rests_tried, len(part.model.rests)):
+                part._search(k)
+            part.refine(len(part.hyps) + 2)
+        for h in list(part.hyps):
+            if h is choice[i] or h[0] > choice[i][0] + ALTERNATIVE_MARGIN:
+                continue
+            trial, found = posed({**choice, i: h})
+            if i not in found and len(found) < len(conflicts):
+                choice[i], poses, conflicts = h, trial, found
+                break
+    # a part carrying others whose position along its length the image cannot settle (a beam
+    # seen end-on under a cylinder shows a patch that fits anywhere along it) is put where its
+    # load is centred on it, among the positions that explain the image as well as the best
+    sup = supports(_records(poses), shapes, contact_tol=0.003)
+    for i in sorted(parts):
+        loads = sorted(j for j in poses if i in sup[j])
+        if not loads:
+            continue
+        h = parts[i].slide_under(
+            choice[i],
+            [poses[j][:3, :3] @ shapes[j].centre_of_mass + poses[j][:3, 3] for j in loads],
+            [shapes[j].volume for j in loads],
+        )
+        if h is not choice[i]:
+            trial, found = posed({**choice, i: h})
+            if len(found) <= len(conflicts):
+                choice[i], poses, conflicts = h, trial, found
+    return poses
+
+
+def perceive(observation, meshes, camera):
+    rgb = np.asarray(observation["rgb"], dtype=np.uint8)
+    depth = np.asarray(observation["depth"], dtype=np.float32)
+    K = np.asarray(camera["K"], dtype=float)
+    T_wc = np.asarray(camera["T_world_camera"], dtype=float)
+    eye = T_wc[:3, 3]
+    # the nearest depth around each pixel: a surface counts as seen through only where all
+    # of its neighbourhood is farther (silhouette pixels are not evidence)
+    near = cv2.erode(np.where(depth > 0, depth, np.float32(1e3)), np.ones((3, 3), np.uint8))
+    view = (np.where(near < 1e3, near, 0.0), K, T_wc[:3, :3].T, -T_wc[:3, :3].T @ T_wc[:3, 3])
+    labels = _labels(rgb)
+    ids = [i for i in PARTS if PARTS[i][0] in meshes]
+    models = {i: _model(meshes[PARTS[i][0]]) for i in ids}
+    shapes = {i: models[i].shape for i in ids}  # by id, and by mesh key for the toolbox
+    shapes.update({PARTS[i][0]: models[i].shape for i in ids})
+    parts = {}
+    for k, i in enumerate(PARTS):
+        if i not in models:
+            continue
+        mask, count = _mask(labels, k)
+        if mask is None:
+            continue
+        pts = _inliers(_points(mask, depth, camera, FINE_POINTS), float(models[i].extent.max()))
+        if len(pts) >= 10:
+            parts[i] = _Part(i, models[i], pts, count, eye, view)
+    missing = [i for i in ids if i not in parts]
+    heights = [models[m].highest[0] - models[m].lowest[0] for m in missing]
+    poses = _choose(parts, shapes, heights)
+    poses = _push_apart(poses, shapes, {i: p.pixels for i, p in parts.items()})
+    if missing:
+        pixels = {i: p.pixels for i, p in parts.items()}
+        poses = _hidden_supporters(poses, shapes, models, missing, pixels)
+        order = sorted(poses, key=lambda i: (_lowest(shapes[i], poses[i]), i))
+        poses = _settle(poses, shapes, order)
+    return [{"id": i, "mesh": PARTS[i][0], "pose": poses[i]} for i in PARTS if i in poses]

@@ -1,0 +1,712 @@
+# Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
+# the assembly domain, the level a model's program should reach. It uses numpy and the
+# toolbox's exact polyhedral geometry (toolbox.stability).
+"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal structure.
+
+The parts' shapes come from the task's dimensions as convex pieces (the arch: two legs and
+sixteen slabs over its half-round opening; the L-block: foot and leg), so support, collision
+and stability are decided on the real shapes (`toolbox.stability`), loads included: a part
+with everything resting only on it must keep its joint centre of mass over its support.
+
+1. Goal: every pose is snapped to a resting pose of its part (the nearest stable orientation,
+   turned about the vertical) and dropped onto what carries it. A part floating, parts
+   interpenetrating, a structure that would tip, or a part out of reach make the goal
+   infeasible, with the reason.
+2. Orientation: the gripper picks from above and turns parts only about the vertical, so a
+   part keeps its resting pose. Each goal pose is replaced by its symmetric equivalent that a
+   turn about the vertical reaches (a pillar upside down is the same pillar). A part whose
+   goal needs another resting pose than its start cannot be re-oriented by this robot: no
+   sequence of top-down transfers tips a part over, so the goal is declared infeasible.
+3. Order (greedy construction, as a person would): every round, place a part whose goal
+   supporters are already final, which nothing rests on or hangs over, whose goal spot is free
+   and whose placement leaves every part standing — lowest goal first. When none can go, move
+   a blocking part to a free temporary place on the table with room for the fingers (the top
+   of a stack in the way, a part squatting on a goal spot). Every intermediate state is
+   checked: nothing picked while loaded, no collision, every part stable.
+"""
+
+import itertools
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
+
+DEPTH = 0.035  # extrusion depth of the profiled parts [m]
+ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
+SAME = 0.004  # a part this close to its goal pose counts as placed [m]
+SAME_ANGLE = np.radians(4.0)
+TILT = np.radians(20.0)  # a goal orientation farther than this from every resting pose
+GOAL_OVERLAP = 0.003  # goal parts may interpenetrate this much (perception noise) [m]
+TOUCH = 0.001  # a placement may touch others this deep [m]
+# temporary places: the robot's comfortable reach in front of it [m]
+REGION_X = (0.32, 0.68)
+REGION_Y = (-0.27, 0.27)
+REACH = 0.72
+# the reachable workspace: no part of a goal may leave it [m]
+WORK_X = (0.25, 0.75)
+WORK_Y = (-0.35, 0.35)
+WORK_REACH = 0.78
+GRID = 0.01  # spacing of candidate temporary places [m]
+CLEARANCES = ((0.03, 0.01), (0.015, 0.005), (0.008, 0.0))  # (to parts, to unbuilt goals) [m]
+
+
+def _box(sx, sy, sz, x0=0.0, z0=0.0):
+    return np.array(
+        [
+            (x0 + a * sx / 2, b * sy / 2, z0 + c * sz)
+            for a in (-1, 1)
+            for b in (-1, 1)
+            for c in (0, 1)
+        ]
+    )
+
+
+def _profile(xz):
+    """A convex x–z polygon extruded by DEPTH along y."""
+    xz = np.asarray(xz, dtype=float)
+    return np.concatenate([np.c_[xz[:, 0], np.full(len(xz), y), xz[:, 1]] for y in (-1, 1)]) * [
+        1,
+        DEPTH / 2,
+        1,
+    ]
+
+
+def _arch():
+    w, h, r, spring = 0.06, 0.065, 0.03, 0.02
+    t = np.linspace(np.pi, 0.0, 17)
+    arc = np.c_[r * np.cos(t), spring + r * np.sin(t)]
+    pieces = [_profile([(-w, 0), (-r, 0), (-r, h), (-w, h)])]
+    for a, b in itertools.pairwise(arc):
+        pieces.append(_profile([a, b, (b[0], h), (a[0], h)]))
+    pieces.append(_profile([(r, 0), (w, 0), (w, h), (r, h)]))
+    return pieces
+
+
+def _cylinder(radius=0.02, height=0.06, sides=48):
+    t = np.arange(sides) * 2 * np.pi / sides
+    ring = np.c_[radius * np.cos(t), radius * np.sin(t)]
+    return [np.concatenate([np.c_[ring, np.zeros(sides)], np.c_[ring, np.full(sides, height)]])]
+
+
+PIECES = {  # the task's parts, origin at the centre of the bottom of their upright bounding box
+    "pillar": [_box(0.03, 0.03, 0.08)],
+    "beam": [_box(0.16, DEPTH, 0.02)],
+    "block": [_box(0.05, DEPTH, 0.03)],
+    "cylinder": _cylinder(),
+    "roof": [_profile([(-0.07, 0), (0.07, 0), (0, 0.04)])],
+    "lblock": [_box(0.08, DEPTH, 0.03), _box(0.03, DEPTH, 0.04, x0=-0.025, z0=0.03)],
+    "arch": _arch(),
+}
+# symmetries from the task: (kind, order about z, half height for the flip)
+SYMMETRY = {
+    "pillar": ("dihedral", 4, 0.04),
+    "beam": ("dihedral", 2, 0.01),
+    "block": ("dihedral", 2, 0.015),
+    "arch": ("cyclic", 2, 0.0),
+    "roof": ("cyclic", 2, 0.0),
+    "cylinder": ("revolution", 0, 0.03),
+    "lblock": ("identity", 1, 0.0),
+}
+SHAPES = {k: Shape.from_pieces(v) for k, v in PIECES.items()}
+REST = {k: [p.rotation for p in stable_poses(s)] for k, s in SHAPES.items()}
+
+# -- the gripper: a Robotiq 2F-85 coming down from above ---------------------------------------
+# Its jaws close on two opposite vertical faces at most 80 mm apart; every part has such pairs
+# across its 30–50 mm side (the cylinder: across its diameter, any way round). The fingers
+# and the wrist above them need room beside the part at the pick and at the place alike.
+OPENING = 0.008  # jaw opening beyond the part's width, per side, for the approach [m]
+GRIP_MARGIN = 0.002  # clearance kept from the neighbours [m]
+FINGER_ROOM = 0.05  # a part moved out of the fingers' way keeps this far from them [m]
+# how the gripper takes each part, in the part's frame: (closing axis, width, fingertip
+# heights, positions along the faces) [m] — the pads (22 mm wide, 37.5 mm tall) sit on both
+# faces where both are flat over the pad, low (3 mm above the table), or as low as the free
+# height between the fingers allows for tall parts, or high on the faces; centred on the
+# part, and along long faces also off-centre (to dodge a neighbour)
+FACES = {
+    "pillar": [((1, 0), 0.03, (0.0259, 0.065), (0.0,)), ((0, 1), 0.03, (0.0259, 0.065), (0.0,))],
+    "beam": [((0, 1), DEPTH, (0.003, 0.005), (0.0, -0.0345, 0.0345, -0.069, 0.069))],
+    "block": [
+        ((0, 1), DEPTH, (0.003, 0.015), (0.0, -0.007, 0.007, -0.014, 0.014)),
+        ((1, 0), 0.05, (0.003, 0.015), (0.0, -0.0065, 0.0065)),
+    ],
+    "arch": [
+        ((0, 1), DEPTH, (0.0114,), (-0.041, 0.041, -0.049)),
+        ((0, 1), DEPTH, (0.05,), (0.0, -0.0245, 0.0245, -0.049, 0.049)),
+    ],
+    "roof": [((0, 1), DEPTH, (0.003, 0.025), (0.0,))],
+    "cylinder": [
+        ((np.cos(a), np.sin(a)), 0.04, (0.0069, 0.045), (0.0,)) for a in np.arange(8) * np.pi / 8
+    ],
+    "lblock": [((0, 1), DEPTH, (0.0165, 0.055), (-0.021, -0.029))],
+}
+
+
+def _finger_boxes(opening, flip):
+    """The gripper as boxes in a grasp frame: origin between the fingertips, a along the
+    closing direction, b along the faces, z up [m]; the wrist and arm above it lean to one
+    side, mirrored with `flip`."""
+    g = opening / 2
+    boxes = []
+    for side in (-1.0, 1.0):
+        for a0, a1, b, z0, z1 in (
+            (g, g + 0.017, 0.012, 0.0, 0.04),
+            (g, g + 0.033, 0.017, 0.04, 0.06),
+            (g, max(g + 0.0315, 0.064), 0.02, 0.06, 0.12),
+        ):
+            boxes.append((sorted((side * a0, side * a1)), (-b, b), (z0, z1)))
+    boxes.append(((-0.038, 0.038), (-0.038, 0.038), (0.12, 0.16)))
+    boxes.append(
+        (sorted((flip * -0.042, flip * 0.082)), sorted((flip * -0.082, flip * 0.042)), (0.16, 0.6))
+    )
+    out = []
+    for (a0, a1), (b0, b1), (z0, z1) in boxes:
+        a0, a1, b0, b1 = a0 - GRIP_MARGIN, a1 + GRIP_MARGIN, b0 - GRIP_MARGIN, b1 + GRIP_MARGIN
+        z0 -= GRIP_MARGIN
+        out.append(np.array([(a, b, z) for a in (a0, a1) for b in (b0, b1) for z in (z0, z1)]))
+    return Shape.from_pieces(out)
+
+
+_FINGERS = {}
+
+
+def _fingers(opening, flip):
+    key = (round(opening, 4), flip)
+    if key not in _FINGERS:
+        _FINGERS[key] = _finger_boxes(opening, flip)
+    return _FINGERS[key]
+
+
+def _grasps(mesh):
+    """Candidate grasps of a part in its own frame: (closing axis (3,), along-face axis (3,),
+    position on the mid-plane (3,) at the fingertips' height, jaw opening, wrist side)."""
+    out = []
+    for (ax, ay), width, tips, us in FACES.get(mesh, []):
+        a = np.array([ax, ay, 0.0]) / np.hypot(ax, ay)
+        b = np.array([-a[1], a[0], 0.0])
+        for tip in tips:
+            for u in us:
+                for flip in (1.0, -1.0):
+                    out.append((a, b, u * b + [0.0, 0.0, tip], width + 2 * OPENING, flip))
+    return out
+
+
+GRASPS = {k: _grasps(k) for k in PIECES}
+
+
+def _rz(yaw):
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _pose(R, t):
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+def _symmetries(mesh, yaw_free=0.0):
+    """Object-frame transforms (4, 4) under which the part looks the same."""
+    kind, n, half = SYMMETRY.get(mesh, ("identity", 1, 0.0))
+    if kind == "identity":
+        return [np.eye(4)]
+    turns = [yaw_free] if kind == "revolution" else [2 * np.pi * k / n for k in range(n)]
+    out = [_pose(_rz(a), np.zeros(3)) for a in turns]
+    if kind in ("dihedral", "revolution"):  # also upside down, about the centre
+        flip = _pose(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 2 * half])
+        out += [T @ flip for T in out]
+    return out
+
+
+_GEOMETRY = {}  # (mesh, pose bytes) → (world points, outline from above, lower/upper corner)
+
+
+def _geometry(mesh, T):
+    key = (mesh, np.asarray(T, dtype=float).tobytes())
+    got = _GEOMETRY.get(key)
+    if got is None:
+        if len(_GEOMETRY) > 20000:
+            _GEOMETRY.clear()
+        pts = np.concatenate(SHAPES[mesh].pieces) @ T[:3, :3].T + T[:3, 3]
+        hull = pts[ConvexHull(pts[:, :2]).vertices, :2]
+        got = _GEOMETRY[key] = (pts, hull, pts.min(axis=0), pts.max(axis=0))
+    return got
+
+
+def _lowest(mesh, T):
+    return float(_geometry(mesh, T)[2][2])
+
+
+def _footprint(mesh, T):
+    """The outline (k, 2) of a posed part seen from above (convex)."""
+    return _geometry(mesh, T)[1]
+
+
+def _box_gap(a, b):
+    """Gap [m] between two parts' axis-aligned boxes (a lower bound of their distance)."""
+    (_, _, lo_a, hi_a), (_, _, lo_b, hi_b) = a, b
+    return float(np.max(np.maximum(lo_a - hi_b, lo_b - hi_a)))
+
+
+def _in_region(xy, x, y, reach):
+    return bool(
+        (xy[:, 0] >= x[0]).all()
+        and (xy[:, 0] <= x[1]).all()
+        and (xy[:, 1] >= y[0]).all()
+        and (xy[:, 1] <= y[1]).all()
+        and (np.linalg.norm(xy, axis=1) <= reach).all()
+    )
+
+
+def _snap_rotation(mesh, R):
+    """The resting orientation Rz(yaw) @ R0 nearest to R, and the tilt [rad] between them."""
+    up = R.T @ [0.0, 0.0, 1.0]  # the world's up in the object frame
+    best, tilt = None, np.inf
+    for R0 in REST[mesh]:
+        a = float(np.arccos(np.clip(up @ (R0.T @ [0.0, 0.0, 1.0]), -1.0, 1.0)))
+        if a < tilt - 1e-9:
+            best, tilt = R0, a
+    M = R @ best.T  # ≈ a turn about z
+    return _rz(np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])) @ best, tilt
+
+
+def _reachable(mesh, current, goal):
+    """The symmetric equivalent of `goal` reached from `current` by a turn about the vertical
+    (the smallest), or None when it needs the part tipped into another resting pose."""
+    yaw_free = 0.0
+    if SYMMETRY.get(mesh, ("identity",))[0] == "revolution":  # keep the current heading
+        M = goal[:3, :3].T @ current[:3, :3]
+        yaw_free = float(np.arctan2(M[1, 0], M[0, 0]))
+    best, best_yaw = None, np.inf
+    for S in _symmetries(mesh, yaw_free):
+        cand = goal @ S
+        rel = cand[:3, :3] @ current[:3, :3].T
+        if rel[2, 2] < np.cos(np.radians(3.0)):
+            continue
+        yaw = abs(float(np.arctan2(rel[1, 0], rel[0, 0])))
+        if yaw < best_yaw - 1e-9:
+            best, best_yaw = cand, yaw
+    if best is None:
+        return None
+    R, _ = _snap_rotation(mesh, best[:3, :3])  # exactly upright for the gripper
+    return _pose(R, best[:3, 3])
+
+
+def _same(mesh, a, b):
+    for S in _symmetries(mesh):
+        c = b @ S
+        if np.linalg.norm(a[:3, 3] - c[:3, 3]) <= SAME:
+            if SYMMETRY.get(mesh, ("identity",))[0] == "revolution":
+                ang = np.arccos(np.clip(a[:3, 2] @ c[:3, 2], -1.0, 1.0))
+            else:
+                ang = np.arccos(np.clip((np.trace(a[:3, :3].T @ c[:3, :3]) - 1) / 2, -1.0, 1.0))
+            if ang <= SAME_ANGLE:
+                return True
+    return False
+
+
+def _records(poses, mesh):
+    return [{"id": i, "mesh": mesh[i], "pose": poses[i]} for i in sorted(poses)]
+
+
+def _snap_goal(goal, mesh):
+    """Goal poses resting exactly on what carries them, or a reason why no plan reaches them."""
+    snapped = {}
+    for i in sorted(goal):
+        R, tilt = _snap_rotation(mesh[i], goal[i][:3, :3])
+        if tilt > TILT:
+            return None, f"'{i}' is tilted {np.degrees(tilt):.0f}° from every resting pose"
+        snapped[i] = _pose(R, goal[i][:3, 3])
+    placed = {}
+    for i in sorted(snapped, key=lambda k: (_lowest(mesh[k], snapped[k]), k)):
+        T = snapped[i]
+        drop = _lowest(mesh[i], T)  # down to the table
+        for j, U in placed.items():
+            gap, axis = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], U, cutoff=0.02)
+            if axis[2] >= 0.7 and -GOAL_OVERLAP <= gap < drop:
+                drop = gap
+        if drop > ON_GAP:
+            return None, f"'{i}' floats {1000 * drop:.0f} mm above its support in the goal"
+        if drop >= -GOAL_OVERLAP:
+            T = T.copy()
+            T[2, 3] -= drop
+        placed[i] = T
+    recs = _records(placed, mesh)
+    hits = collisions(recs, SHAPES, tolerance=GOAL_OVERLAP)
+    if hits:
+        a, b, depth = hits[0]
+        return None, f"'{a}' and '{b}' overlap by {1000 * depth:.0f} mm in the goal"
+    for i, T in placed.items():
+        if not _in_region(_footprint(mesh[i], T), WORK_X, WORK_Y, WORK_REACH):
+            return None, f"'{i}' is out of the robot's reach in the goal"
+    bad = unstable_objects(recs, SHAPES, contact_tol=0.002, margin=-0.002)
+    if bad:
+        i = sorted(bad)[0]
+        return None, f"the goal structure cannot stand: '{i}' {bad[i]}"
+    return placed, ""
+
+
+class _World:
+    """The current poses, with the support relation of the state cached."""
+
+    def __init__(self, poses, mesh):
+        self.poses, self.mesh = dict(poses), mesh
+        self._sup = None
+
+    def moved(self, i, T):
+        w = _World(self.poses, self.mesh)
+        w.poses[i] = T
+        return w
+
+    @property
+    def sup(self):
+        if self._sup is None:
+            self._sup = supports(_records(self.poses, self.mesh), SHAPES, contact_tol=0.002)
+        return self._sup
+
+    def loaded(self):
+        """Parts something rests on."""
+        return {j for s in self.sup.values() for j in s}
+
+    def hits(self, i, T, tolerance=TOUCH, clearance=0.0, skip=()):
+        """Whether part i at pose T comes closer than `clearance` to another part."""
+        box = _geometry(self.mesh[i], T)
+        for j, U in self.poses.items():
+            if j == i or j in skip:
+                continue
+            if _box_gap(box, _geometry(self.mesh[j], U)) > max(clearance, 0.0) + 0.001:
+                continue
+            gap, _ = separation(
+                SHAPES[self.mesh[i]], T, SHAPES[self.mesh[j]], U, cutoff=clearance + 0.001
+            )
+            if gap < (clearance if clearance > 0 else -tolerance):
+                return True
+        return False
+
+    def stands(self):
+        return not unstable_objects(_records(self.poses, self.mesh), SHAPES, contact_tol=0.002)
+
+
+def _grip_blockers(world, i, T, grasp):
+    """Parts of `world` (other than i) that the gripper holding part i at pose T by `grasp`
+    would touch; [] when it has room."""
+    a, b, p, opening, flip = grasp
+    R = T[:3, :3]
+    G = np.eye(4)
+    G[:3, 0], G[:3, 1] = R @ a, R @ b
+    G[:3, 3] = R @ p + T[:3, 3]
+    fingers = _fingers(opening, flip)
+    lo = G[:3, 3] - [0.13, 0.13, 0.0]
+    hi = G[:3, 3] + [0.13, 0.13, 1.0]
+    out = []
+    for j, U in sorted(world.poses.items()):
+        if j == i:
+            continue
+        _, _, lo_j, hi_j = _geometry(world.mesh[j], U)
+        if np.any(lo_j > hi) or np.any(hi_j < lo):
+            continue
+        if separation(fingers, G, SHAPES[world.mesh[j]], U, cutoff=0.0)[0] < 0.0:
+            out.append(j)
+    return out
+
+
+def _pickable(world, i):
+    """Whether some grasp of part i has room where it stands."""
+    return any(
+        not _grip_blockers(world, i, world.poses[i], g) for g in GRASPS.get(world.mesh[i], [])
+    )
+
+
+def _above(world, i, T):
+    """Parts over part i if it were at pose T (see `_hangs_over`)."""
+    return _hangs_over(world, i, T)
+
+
+def _takes_grasp(world, after, i, T, movers):
+    """Parts of `movers` near pose T that can be picked in `world` but not once part i is at T."""
+    lo, hi = _geometry(world.mesh[i], T)[2] - 0.12, _geometry(world.mesh[i], T)[3] + 0.12
+    out = []
+    for j in movers:
+        if j == i:
+            continue
+        _, _, lo_j, hi_j = _geometry(world.mesh[j], world.poses[j])
+        if np.any(lo_j > hi) or np.any(hi_j < lo):
+            continue
+        if _pickable(world, j) and not _pickable(after, j):
+            out.append(j)
+    return out
+
+
+def _move_blockers(world, i, T_to, after):
+    """None when part i can be carried from where it is in `world` to `T_to` (leaving
+    `after`) by one grasp that has room at both ends; else the parts in the way, most often
+    first."""
+    count = {}
+    for grasp in GRASPS.get(world.mesh[i], []):
+        hit = _grip_blockers(world, i, world.poses[i], grasp)
+        hit = hit or _grip_blockers(after, i, T_to, grasp)
+        if not hit:
+            return None
+        for j in hit:
+            count[j] = count.get(j, 0) + 1
+    return sorted(count, key=lambda j: (-count[j], j))
+
+
+def _hangs_over(world, i, T=None):
+    """Parts with a piece above part i (at its pose, or at T) whose outline overlaps it: the
+    part rises and comes down vertically, so they must go first (the slab over an arch's
+    opening hangs over whatever stands in the opening)."""
+    mesh, poses = world.mesh, world.poses
+    T = poses[i] if T is None else T
+    top = _geometry(mesh[i], T)[3][2]
+    fi = _footprint(mesh[i], T)
+    out = []
+    for j in sorted(poses):
+        if j == i or _geometry(mesh[j], poses[j])[3][2] < top - 0.002:
+            continue
+        for lo, hull in _pieces(mesh[j], poses[j]):
+            if lo >= top - 0.002 and _outline_gap(fi, hull) < -0.002:
+                out.append(j)
+                break
+    return out
+
+
+def _pieces(mesh, T):
+    """Lowest point and outline from above of every convex piece of a posed part, cached."""
+    key = (mesh, "pieces", np.asarray(T, dtype=float).tobytes())
+    got = _GEOMETRY.get(key)
+    if got is None:
+        got = []
+        for p in SHAPES[mesh].pieces:
+            w = p @ T[:3, :3].T + T[:3, 3]
+            got.append((float(w[:, 2].min()), w[ConvexHull(w[:, :2]).vertices, :2]))
+        _GEOMETRY[key] = got
+    return got
+
+
+def _outline_gap(a, b):
+    """Gap [m] between two convex outlines (k, 2) in order (negative: overlap depth)."""
+    lo = np.maximum(a.min(axis=0) - b.max(axis=0), b.min(axis=0) - a.max(axis=0)).max()
+    if lo > 0.05:
+        return float(lo)
+    best = -np.inf
+    for h in (a, b):
+        e = np.roll(h, -1, axis=0) - h
+        n = np.stack([e[:, 1], -e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None]
+        pa, pb = a @ n.T, b @ n.T
+        best = max(best, float(np.max(np.maximum(pa.min(0) - pb.max(0), pb.min(0) - pa.max(0)))))
+    return best
+
+
+def _height(mesh, T):
+    pts = np.concatenate(SHAPES[mesh].pieces) @ T[:3, :3].T
+    return float(np.ptp(pts[:, 2]))
+
+
+def _top_of(world, j):
+    """The part at the top of whatever rests on or hangs over j (j itself when clear)."""
+    seen = set()
+    while j not in seen:
+        seen.add(j)
+        above = sorted(k for k in world.poses if j in world.sup[k]) or _hangs_over(world, j)
+        if not above:
+            return j
+        j = above[0]
+    return j
+
+
+def _gaps(hull, others, shifts):
+    """Outline gaps [m] (n, m) between `hull` moved by each of `shifts` (n, 2) and each of the
+    convex outlines `others` (separating axes of both polygons, all shifts at once)."""
+    out = np.full((len(shifts), len(others)), np.inf)
+    for m, h in enumerate(others):
+        axes = []
+        for poly in (hull, h):
+            e = np.roll(poly, -1, axis=0) - poly
+            axes.append(np.stack([e[:, 1], -e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None])
+        n = np.concatenate(axes)  # (k, 2)
+        pa, pb = hull @ n.T, h @ n.T
+        d = shifts @ n.T  # (s, k)
+        gap = np.maximum(pa.min(0) + d - pb.max(0), pb.min(0) - pa.max(0) - d)
+        out[:, m] = gap.max(axis=1)
+    return out
+
+
+def _temporary(world, i, pending, keep=()):
+    """A free place on the table for part i (same orientation), nearest to where it is, with
+    room for the fingers around it seen from above (nothing overhangs it either)."""
+    mesh = world.mesh[i]
+    T0 = world.poses[i].copy()
+    T0[2, 3] -= _lowest(mesh, T0)
+    hull = _footprint(mesh, T0)
+    xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
+    ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
+    cand = np.array([(x, y) for x in xs for y in ys])
+    order = np.argsort(np.linalg.norm(cand - T0[:2, 3], axis=1), kind="stable")
+    cand = cand[order]
+    shifts = cand - T0[:2, 3]
+    corners = hull[None, :, :] + shifts[:, None, :]  # the region is convex: corners suffice
+    inside = (
+        (corners[..., 0] >= REGION_X[0]).all(axis=1)
+        & (corners[..., 0] <= REGION_X[1]).all(axis=1)
+        & (corners[..., 1] >= REGION_Y[0]).all(axis=1)
+        & (corners[..., 1] <= REGION_Y[1]).all(axis=1)
+        & (np.linalg.norm(corners, axis=2) <= REACH).all(axis=1)
+    )
+    others = [_footprint(world.mesh[j], U) for j, U in sorted(world.poses.items()) if j != i]
+    to_parts = _gaps(hull, others, shifts).min(axis=1, initial=np.inf)
+    goals = [_footprint(world.mesh[j], G) for j, G in pending]
+    to_goals = _gaps(hull, goals, shifts).min(axis=1, initial=np.inf)
+    to_keep = _gaps(hull, list(keep), shifts).min(axis=1, initial=np.inf)
+    moved = np.linalg.norm(shifts, axis=1) >= 0.02  # a place, not where it stands
+    for clearance, goal_clearance in CLEARANCES:
+        ok = inside & moved & (to_parts >= clearance) & (to_goals >= goal_clearance)
+        ok &= to_keep >= max(goal_clearance, FINGER_ROOM if clearance >= CLEARANCES[0][0] else 0)
+        if ok.any():
+            T = T0.copy()
+            T[:2, 3] = cand[int(np.argmax(ok))]
+            return T
+    return None
+
+
+def plan(start_state, goal_state):
+    start_recs = {str(r["id"]): r for r in start_state["objects"]}
+    goal_recs = {str(r["id"]): r for r in goal_state["objects"]}
+    if sorted(start_recs) != sorted(goal_recs):
+        missing = sorted(set(start_recs) ^ set(goal_recs))
+        return {
+            "status": "infeasible",
+            "reason": f"start shows {sorted(start_recs)} but goal shows {sorted(goal_recs)} "
+            f"({', '.join(missing)} seen in only one of them)",
+        }
+    mesh = {i: str(r["mesh"]) for i, r in start_recs.items()}
+    for i, r in goal_recs.items():
+        if str(r["mesh"]) != mesh[i] or mesh[i] not in SHAPES:
+            return {"status": "infeasible", "reason": f"'{i}' has no known shape ({mesh[i]!r})"}
+    start = {i: np.asarray(r["pose"], dtype=float) for i, r in start_recs.items()}
+    goal, why = _snap_goal({i: np.asarray(r["pose"], float) for i, r in goal_recs.items()}, mesh)
+    if goal is None:
+        return {"status": "infeasible", "reason": why}
+    target = {}
+    for i in sorted(goal):
+        target[i] = _reachable(mesh[i], start[i], goal[i])
+        if target[i] is None:
+            return {
+                "status": "infeasible",
+                "reason": f"'{i}' rests on another face in the goal than at the start: the "
+                "gripper picks from above and turns parts only about the vertical, so no "
+                "sequence of transfers can tip it over (it needs a re-grasp from the side)",
+            }
+    goal_world = _World(target, mesh)
+    goal_sup = {i: set(s) for i, s in goal_world.sup.items()}
+    result = _build(start, goal, target, goal_sup, mesh, grip=True)
+    if result["status"] != "ok":  # no order leaves the fingers room: the geometric order
+        result = _build(start, goal, target, goal_sup, mesh, grip=False)
+    return result
+
+
+def _build(start, goal, target, goal_sup, mesh, grip):
+    """Greedy construction (see the module docstring); `grip`: every move must leave the
+    gripper room at both ends."""
+    world = _World(start, mesh)
+    steps = []
+    for _ in range(3 * len(goal) + 2):
+        sup = world.sup
+        done = {}
+
+        def is_done(i, sup=sup, done=done, world=world):
+            if i not in done:
+                done[i] = False  # guards against support cycles
+                done[i] = (
+                    _same(mesh[i], world.poses[i], target[i])
+                    and set(sup[i]) == goal_sup[i]
+                    and all(is_done(j) for j in goal_sup[i] if j != "table")
+                )
+            return done[i]
+
+        if all(is_done(i) for i in goal):
+            return {"status": "ok", "steps": steps}
+        loaded = world.loaded()
+        ready = sorted(
+            (
+                i
+                for i in goal
+                if not is_done(i) and all(is_done(j) for j in goal_sup[i] - {"table"})
+            ),
+            key=lambda i: (_lowest(mesh[i], target[i]), i),
+        )
+        move, in_the_way = None, []
+        for i in ready:
+            if i in loaded or _hangs_over(world, i):
+                continue
+            T = _reachable(mesh[i], world.poses[i], target[i])
+            if T is None or world.hits(i, T):
+                continue
+            after = world.moved(i, T)
+            if any(i in s for s in after.sup.values()) or not after.stands():
+                continue  # it would slide under a part, or leave something tipping
+            if any(i in _hangs_over(after, j) for j in goal if not is_done(j)):
+                continue  # it would hang over a part still to be moved
+            if grip:
+                blockers = _move_blockers(world, i, T, after)
+                if blockers is None:
+                    blockers = _above(world, i, T)  # it comes down vertically
+                if blockers is None or not blockers:
+                    movers = [j for j in goal if not is_done(j)]
+                    blockers = _takes_grasp(world, after, i, T, movers) or None
+                if blockers is not None:  # no room for the fingers, or it would take away
+                    for j in blockers:  # another's grasp: j must go, well away from i
+                        if not is_done(j):
+                            in_the_way.append((j, [world.poses[i], T], mesh[i]))
+                    continue
+            move = (i, T)
+            break
+        if move is None:
+            move = _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip)
+            if isinstance(move, str):
+                return {"status": "infeasible", "reason": move}
+        i, T = move
+        world = world.moved(i, T)
+        steps.append({"object": i, "target_pose": T.tolist()})
+    return {"status": "infeasible", "reason": f"no plan within {len(steps)} moves"}
+
+
+def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip):
+    """A move of one blocking part to a temporary place, or the reason there is none."""
+    keep = {}  # part → outlines it must stay clear of: where the fingers must go
+    for j, poses, m in in_the_way:
+        keep.setdefault(_top_of(world, j), []).extend(_footprint(m, T) for T in poses)
+    candidates = list(keep)
+    for i in ready:  # what stands on, over or in the way of a part that could be placed
+        if i in world.loaded() or _hangs_over(world, i):
+            candidates.append(_top_of(world, i))
+        T = _reachable(mesh[i], world.poses[i], target[i])
+        if T is None:
+            continue
+        after = world.moved(i, T)
+        for j in sorted(world.poses, key=lambda j: (-_lowest(mesh[j], world.poses[j]), j)):
+            if j == i:
+                continue
+            gap, _ = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], world.poses[j], cutoff=0.002)
+            if gap < -TOUCH or (not is_done(j) and i in _hangs_over(after, j)):
+                candidates.append(_top_of(world, j))
+    # a stack in the wrong order: the highest part that is not final and can be lifted
+    loaded = world.loaded()
+    for i in sorted(world.poses, key=lambda i: (-_lowest(mesh[i], world.poses[i]), i)):
+        if not is_done(i) and i not in loaded:
+            candidates.append(i)
+    seen = []
+    for b in candidates:
+        if b in seen:
+            continue
+        seen.append(b)
+        pending = [(i, target[i]) for i in sorted(target) if not is_done(i) and i != b]
+        T = _temporary(world, b, pending, keep.get(b, []))
+        if T is None:
+            continue
+        after = world.moved(b, T)
+        if after.stands() and not (grip and _move_blockers(world, b, T, after) is not None):
+            return (b, T)
+    if not seen:
+        return "no part can be moved"
+    return f"no free place on the table to put '{seen[0]}' down"
