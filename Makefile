@@ -27,8 +27,8 @@ venv: .venv/.synced ## create .venv from the lock file (uv)
 system: ## install and start the system pieces (Docker engine, EGL/Mesa) when missing
 	@bash scripts/bootstrap-system.sh
 
-test: venv system sandbox-image ## run the whole test suite (unit, property, sandbox, simulator)
-	$(PY) -m pytest
+test: venv system sandbox-image ## run the whole test suite (unit, property, sandbox, simulator) and the committed artifacts' property suites
+	$(PY) -m pytest --rivet-artifacts artifacts/
 
 lint: venv ## ruff (lint + format check) and mypy
 	.venv/bin/ruff check .

@@ -85,7 +85,8 @@ class CheckItem(pytest.Item):
     def __init__(self, *, domain: str, function: str, **kw) -> None:
         super().__init__(**kw)
         self.domain = domain
-        self.function = function
+        # not `self.function`: pytest's keyword matching (-k) takes that for a test function
+        self.program = function
 
     def runtest(self) -> None:
         from artifacts.store import verify
@@ -97,11 +98,11 @@ class CheckItem(pytest.Item):
             import sandbox
 
             self._executors[backend] = sandbox.open_executor(backend)
-        deps = {d: sources[d] for d in dag.CODE_DEPS[self.function]}
+        deps = {d: sources[d] for d in dag.CODE_DEPS[self.program]}
         report = run_checks(
             self.domain,
-            self.function,
-            sources[self.function],
+            self.program,
+            sources[self.program],
             deps=deps,
             executor=self._executors[backend],
         )
@@ -114,7 +115,7 @@ class CheckItem(pytest.Item):
         return super().repr_failure(excinfo, style=style)
 
     def reportinfo(self):
-        return self.path, None, f"{self.domain}: {self.function} check suite"
+        return self.path, None, f"{self.domain}: {self.program} check suite"
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:

@@ -125,9 +125,10 @@ def test_property_plan_raises_on_infeasible_goal(check):
 
 
 def test_property_nondeterministic_plan(check):
+    anchor = "        for i in ready:\n"
+    assert anchor in program("plan")  # the bug must really be planted
     source = program("plan").replace(
-        "        move = None\n        for i in ready:",
-        "        import random\n\n        random.shuffle(ready)\n        move = None\n        for i in ready:",
+        anchor, "        import random\n\n        random.shuffle(ready)\n" + anchor, 1
     )
     assert "property.deterministic" in failing(check("plan", source))
 

@@ -1,0 +1,45 @@
+"""`pytest --rivet-artifacts DIR`, as a user's CI runs it: one item per artifact set's integrity
+and per frozen program's check suite; a tampered file fails its set's integrity item."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _pytest(root: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "--rivet-artifacts", str(root)]
+        + list(args),
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+
+
+def test_items_per_set_and_function_and_keyword_selection(tmp_path):
+    shutil.copytree(REPO / "artifacts" / "cubes", tmp_path / "cubes")
+    manifest = str(tmp_path / "cubes" / "manifest.json")
+    listed = _pytest(tmp_path, "--collect-only", "-q", manifest)
+    assert listed.returncode == 0, listed.stdout + listed.stderr
+    for item in ("integrity", "render", "perceive", "relate", "plan"):
+        assert f"manifest.json::cubes::{item}" in listed.stdout
+    ok = _pytest(tmp_path, "-q", "-k", "integrity", manifest)
+    assert ok.returncode == 0, ok.stdout + ok.stderr
+    assert "1 passed" in ok.stdout
+
+
+def test_a_tampered_file_fails_the_integrity_item_naming_it(tmp_path):
+    shutil.copytree(REPO / "artifacts" / "cubes", tmp_path / "cubes")
+    plan = tmp_path / "cubes" / "plan.py"
+    data = bytearray(plan.read_bytes())
+    data[-2] ^= 0x01
+    plan.write_bytes(bytes(data))
+    bad = _pytest(tmp_path, "-q", "-k", "integrity", str(tmp_path / "cubes" / "manifest.json"))
+    assert bad.returncode == 1, bad.stdout + bad.stderr
+    assert "plan.py" in bad.stdout
