@@ -163,7 +163,7 @@ class GraspCheck:
             self.meshes[mesh],
             T_from,
             T_to,
-            symmetries=self.symmetries[mesh],
+            symmetries=list(self.symmetries[mesh]),
             pick_obstacles=obstacles(key[4], others),
             place_obstacles=obstacles(key[5], place_others),
             margins=self.margins,

@@ -128,7 +128,7 @@ class Planner:
                     continue
                 pose = self._reachable(mesh[i], state[i], target[i])
                 body = place(i, self.parts[mesh[i]], pose) if pose is not None else None
-                if body is None or not self._fits(i, body, bodies, is_done):
+                if pose is None or body is None or not self._fits(i, body, bodies, is_done):
                     continue
                 if robot is not None and not robot.allows(i, pose):
                     continue

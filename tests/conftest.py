@@ -8,6 +8,8 @@ from pathlib import Path
 # Set before anything imports MuJoCo, pyrender or the Anthropic client.
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-os.environ.setdefault("MENAGERIE_ROOT", str(Path(__file__).resolve().parents[2] / "shared" / "menagerie"))
+os.environ.setdefault(
+    "MENAGERIE_ROOT", str(Path(__file__).resolve().parents[2] / "shared" / "menagerie")
+)
 os.environ["RIVET_FORBID_MODEL_API"] = "1"
 os.environ.pop("ANTHROPIC_API_KEY", None)  # a developer's real key never reaches a test

@@ -133,7 +133,9 @@ def spread_footprints(
             row[2 * i : 2 * i + 2] = (np.cos(a), np.sin(a))
             A.append(row)
             b.append(reach)
-    bounds = [(0.0, 0.0) if (k // 2) in fixed else (None, None) for k in range(2 * n)]
+    bounds: list[tuple[float | None, float | None]] = [
+        (0.0, 0.0) if (k // 2) in fixed else (None, None) for k in range(2 * n)
+    ]
     bounds += [(0.0, None)] * (2 * n)
     lowest = min(p[2] for p in pairs)
     bounds.append((min(lowest, gap), gap))

@@ -13,8 +13,16 @@ REPO = Path(__file__).resolve().parents[2]
 
 def _pytest(root: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "--rivet-artifacts", str(root)]
-        + list(args),
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-p",
+            "no:cacheprovider",
+            "--rivet-artifacts",
+            str(root),
+            *args,
+        ],
         capture_output=True,
         text=True,
         timeout=300,
