@@ -10,6 +10,7 @@ hash-checked programs of artifacts/DOMAIN). Trials come from the fixed benchmark
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from contracts.errors import UsageError
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     names = domains.names() if args.all else [domains.load(args.domain).name]
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
-    views = VIEWS if args.all else [args.view]
+    views = VIEWS if args.all or args.view == "all" else [args.view]
     results: dict[str, dict[str, dict]] = {}
     for name in names:
         for view in views:
@@ -110,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
             if "front" in results[name]:
                 front = results[name]["front"]
                 front["views"] = {v: results[name][v]["final_sr"] for v in results[name]}
+                manifest = Path("artifacts") / name / "manifest.json"
+                front["set_hash"] = json.loads(manifest.read_text())["set_hash"]  # what ran
                 write_json(front, Path("artifacts") / name / "eval.json")
     if args.all:
         print("\nTable I (front camera) — ours vs paper")
@@ -150,7 +153,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="oracle | programs DIR | artifacts (default)",
     )
     p.add_argument("--trials", type=int, default=None, metavar="N", help="run the first N trials")
-    p.add_argument("--view", choices=VIEWS, default="front", help="observation camera")
+    p.add_argument(
+        "--view",
+        choices=(*VIEWS, "all"),
+        default="front",
+        help="observation camera ('all': each in turn)",
+    )
     p.add_argument(
         "--seed",
         type=int,

@@ -23,6 +23,12 @@ with everything resting only on it must keep its joint centre of mass over its s
    a blocking part to a free temporary place on the table with room for the fingers (the top
    of a stack in the way, a part squatting on a goal spot). Every intermediate state is
    checked: nothing picked while loaded, no collision, every part stable.
+4. The gripper (a Robotiq 2F-85 from above, modelled as boxes for fingers, couplers, base and
+   wrist per grasp of each part): a move is made only with one grasp that has room at the
+   pick and at the place, and when it takes no grasp away from a part still to move; parts in
+   the fingers' way go aside first. Preferences, never dead ends: a placement that would wall
+   in a goal place still to fill waits, and a temporary place is one from which the part can
+   be taken on to its goal. When no order satisfies the gripper, the geometric order stands.
 """
 
 import itertools
@@ -192,6 +198,8 @@ def _grasps(mesh):
 
 
 GRASPS = {k: _grasps(k) for k in PIECES}
+SLOT_TRIES = 40  # temporary places tried for one that leaves goal places room and the
+# part a grasp onwards to its goal
 
 
 def _rz(yaw):
@@ -437,6 +445,29 @@ def _takes_grasp(world, after, i, T, movers):
     return out
 
 
+def _room(world, j, G):
+    """Whether some grasp of part j at pose G has room among the parts of `world`."""
+    return any(not _grip_blockers(world, j, G, g) for g in GRASPS.get(world.mesh[j], []))
+
+
+def _takes_slot(world, i, T, target, pending, final, below):
+    """Parts of `pending` whose goal place has room for the gripper among the `final` parts
+    but not once part i is at T as well: i would wall the place in, so it had better wait.
+    `below[j]`: the parts j rests on in the goal, directly or not (they go first anyway)."""
+    lo, hi = _geometry(world.mesh[i], T)[2] - 0.15, _geometry(world.mesh[i], T)[3] + 0.15
+    out = []
+    for j in pending:
+        if j == i or i in below[j]:
+            continue
+        _, _, lo_j, hi_j = _geometry(world.mesh[j], target[j])
+        if np.any(lo_j > hi) or np.any(hi_j < lo):
+            continue
+        base = _World({**final, j: target[j]}, world.mesh)
+        if _room(base, j, target[j]) and not _room(base.moved(i, T), j, target[j]):
+            out.append(j)
+    return out
+
+
 def _move_blockers(world, i, T_to, after):
     """None when part i can be carried from where it is in `world` to `T_to` (leaving
     `after`) by one grasp that has room at both ends; else the parts in the way, most often
@@ -465,7 +496,7 @@ def _hangs_over(world, i, T=None):
         if j == i or _geometry(mesh[j], poses[j])[3][2] < top - 0.002:
             continue
         for lo, hull in _pieces(mesh[j], poses[j]):
-            if lo >= top - 0.002 and _outline_gap(fi, hull) < -0.002:
+            if lo >= top - 0.002 and _outline_gap(fi, hull) < -0.0003:
                 out.append(j)
                 break
     return out
@@ -532,7 +563,7 @@ def _gaps(hull, others, shifts):
     return out
 
 
-def _temporary(world, i, pending, keep=()):
+def _temporary(world, i, pending, keep=(), poor_place=None):
     """A free place on the table for part i (same orientation), nearest to where it is, with
     room for the fingers around it seen from above (nothing overhangs it either)."""
     mesh = world.mesh[i]
@@ -563,9 +594,14 @@ def _temporary(world, i, pending, keep=()):
         ok = inside & moved & (to_parts >= clearance) & (to_goals >= goal_clearance)
         ok &= to_keep >= max(goal_clearance, FINGER_ROOM if clearance >= CLEARANCES[0][0] else 0)
         if ok.any():
-            T = T0.copy()
-            T[:2, 3] = cand[int(np.argmax(ok))]
-            return T
+            first = None
+            for k in np.flatnonzero(ok)[:SLOT_TRIES]:  # rather where it does no harm
+                T = T0.copy()
+                T[:2, 3] = cand[k]
+                if poor_place is None or not poor_place(i, T):
+                    return T
+                first = T if first is None else first
+            return first
     return None
 
 
@@ -609,6 +645,15 @@ def _build(start, goal, target, goal_sup, mesh, grip):
     """Greedy construction (see the module docstring); `grip`: every move must leave the
     gripper room at both ends."""
     world = _World(start, mesh)
+    goal_world = _World(target, mesh)
+    below = {}  # part → the parts it rests on in the goal, directly or not
+    for j in sorted(goal):
+        stack, seen = [j], set()
+        while stack:
+            for k in goal_sup[stack.pop()] - {"table"} - seen:
+                seen.add(k)
+                stack.append(k)
+        below[j] = seen
     steps = []
     for _ in range(3 * len(goal) + 2):
         sup = world.sup
@@ -635,7 +680,26 @@ def _build(start, goal, target, goal_sup, mesh, grip):
             ),
             key=lambda i: (_lowest(mesh[i], target[i]), i),
         )
-        move, in_the_way = None, []
+        move, in_the_way, deferred = None, [], None
+        final = {k: U for k, U in world.poses.items() if is_done(k)}
+        pending = [j for j in goal if not is_done(j)]
+
+        def slot_taken(i, T, world=world, final=final, pending=pending):
+            return bool(_takes_slot(world, i, T, target, pending, final, below))
+
+        def stuck_there(i, T, world=world):
+            """Part i put down at T could not be taken from there to its goal by one grasp
+            with room at both ends (seen against the finished goal)."""
+            here = world.moved(i, T)
+            return not any(
+                not _grip_blockers(here, i, T, g)
+                and not _grip_blockers(goal_world, i, target[i], g)
+                for g in GRASPS.get(mesh[i], [])
+            )
+
+        def poor_place(i, T):
+            return slot_taken(i, T) or stuck_there(i, T)
+
         for i in ready:
             if i in loaded or _hangs_over(world, i):
                 continue
@@ -659,10 +723,16 @@ def _build(start, goal, target, goal_sup, mesh, grip):
                         if not is_done(j):
                             in_the_way.append((j, [world.poses[i], T], mesh[i]))
                     continue
+                if slot_taken(i, T):  # another goal place would lose its room: later
+                    deferred = deferred or (i, T)
+                    continue
             move = (i, T)
             break
+        move = move or deferred  # a preference, never a dead end
         if move is None:
-            move = _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip)
+            move = _clear_the_way(
+                world, ready, target, goal_sup, is_done, mesh, in_the_way, grip, poor_place
+            )
             if isinstance(move, str):
                 return {"status": "infeasible", "reason": move}
         i, T = move
@@ -671,7 +741,7 @@ def _build(start, goal, target, goal_sup, mesh, grip):
     return {"status": "infeasible", "reason": f"no plan within {len(steps)} moves"}
 
 
-def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip):
+def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip, poor_place):
     """A move of one blocking part to a temporary place, or the reason there is none."""
     keep = {}  # part → outlines it must stay clear of: where the fingers must go
     for j, poses, m in in_the_way:
@@ -701,7 +771,7 @@ def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, gr
             continue
         seen.append(b)
         pending = [(i, target[i]) for i in sorted(target) if not is_done(i) and i != b]
-        T = _temporary(world, b, pending, keep.get(b, []))
+        T = _temporary(world, b, pending, keep.get(b, []), poor_place if grip else None)
         if T is None:
             continue
         after = world.moved(b, T)
