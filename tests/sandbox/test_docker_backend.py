@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -136,15 +135,11 @@ def test_missing_image_says_how_to_build_it():
         DockerExecutor(image="rivet-sandbox:000000000000")
 
 
-def test_cold_start_and_warm_jobs_are_quick(sandbox_image):
+def test_first_job_on_a_new_container_and_warm_jobs_after_it(sandbox_image):
+    # Correctness only; `make bench` measures cold start and warm overhead.
     with DockerExecutor(image=sandbox_image) as ex:
-        t0 = time.perf_counter()
-        assert ex.run(Job(source="def f():\n    return 1\n", function="f")).ok
-        cold = time.perf_counter() - t0
+        assert ex.run(Job(source="def f():\n    return 1\n", function="f")).verdict == "ok"
         ex.warm()
-        t0 = time.perf_counter()
-        for _ in range(10):
-            ex.run(Job(source="def f():\n    return 1\n", function="f"))
-        warm = (time.perf_counter() - t0) / 10
-    # Generous bounds for a loaded 2-core CI machine; `make bench` reports the real figures.
-    assert cold < 10 and warm < 0.25, (cold, warm)
+        for k in range(10):
+            report = ex.run(Job(source=f"def f():\n    return {k}\n", function="f"))
+            assert report.verdict == "ok" and report.output == k, report
