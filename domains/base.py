@@ -438,6 +438,11 @@ class Domain:
             found = [str(p) for p in physical_problems(self, scene)]
         return found
 
+    @property
+    def reference_transcript(self) -> Path:
+        """The replay transcript `rivet author DOMAIN` plays by default (may not exist yet)."""
+        return self.root / "transcripts" / "reference"
+
     # -- the fixed benchmark ---------------------------------------------------------------
 
     @property

@@ -23,7 +23,7 @@ def _client(args: argparse.Namespace, domain, run_dir: Path):
     if args.model:
         inner = AnthropicClient(args.model, budget=budget)
         return RecordingClient(inner, run_dir / "transcript", domain=domain.name)
-    replay = args.replay or domain.root / "transcripts" / "reference"
+    replay = args.replay or domain.reference_transcript
     if not (Path(replay) / "meta.json").is_file():
         raise UsageError(
             f"no transcript at {replay}: pass --replay DIR, or --model M with ANTHROPIC_API_KEY set"

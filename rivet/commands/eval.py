@@ -10,7 +10,6 @@ hash-checked programs of artifacts/DOMAIN). Trials come from the fixed benchmark
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from contracts.errors import UsageError
@@ -61,12 +60,13 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str) -> dict:
 
     domain = domains.load(domain_name)
     policy = _policy(args.policy)
+    set_hash = None
     if policy[0] == "artifacts":
         from artifacts import verify
 
-        verify(
-            domain_name, Path(policy[1]) if policy[1] else None
-        )  # fail fast, exit 1 naming the file
+        # fail fast, exit 1 naming the file
+        manifest, _ = verify(domain_name, Path(policy[1]) if policy[1] else None)
+        set_hash = manifest["set_hash"]
     instances = _instances(domain, args)
     config = EvalConfig(
         domain=domain_name,
@@ -83,6 +83,8 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str) -> dict:
         progress=None if args.quiet else progress_bar(len(instances), f"{domain_name}/{view}"),
     )
     print(table(summary))
+    if set_hash is not None:
+        summary["set_hash"] = set_hash  # which programs ran
     return summary
 
 
@@ -111,8 +113,6 @@ def run(args: argparse.Namespace) -> int:
             if "front" in results[name]:
                 front = results[name]["front"]
                 front["views"] = {v: results[name][v]["final_sr"] for v in results[name]}
-                manifest = Path("artifacts") / name / "manifest.json"
-                front["set_hash"] = json.loads(manifest.read_text())["set_hash"]  # what ran
                 write_json(front, Path("artifacts") / name / "eval.json")
     if args.all:
         print("\nTable I (front camera) — ours vs paper")

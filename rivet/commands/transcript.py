@@ -21,7 +21,7 @@ def pack(args: argparse.Namespace) -> int:
     domain = domains.load(args.domain)
     folder = Path(args.programs)
     sequence = program_sequence(folder)
-    out = Path(args.out) if args.out else domain.root / "transcripts" / "reference"
+    out = Path(args.out) if args.out else domain.reference_transcript
     staging = out.with_name(out.name + ".packing")
     if staging.exists():
         shutil.rmtree(staging)

@@ -418,21 +418,15 @@ def _grip_blockers(world, i, T, grasp):
     return out
 
 
-def _pickable(world, i):
-    """Whether some grasp of part i has room where it stands."""
-    return any(
-        not _grip_blockers(world, i, world.poses[i], g) for g in GRASPS.get(world.mesh[i], [])
-    )
-
-
-def _above(world, i, T):
-    """Parts over part i if it were at pose T (see `_hangs_over`)."""
-    return _hangs_over(world, i, T)
+def _room(world, j, G):
+    """Whether some grasp of part j at pose G has room among the parts of `world`."""
+    return any(not _grip_blockers(world, j, G, g) for g in GRASPS.get(world.mesh[j], []))
 
 
 def _takes_grasp(world, after, i, T, movers):
     """Parts of `movers` near pose T that can be picked in `world` but not once part i is at T."""
-    lo, hi = _geometry(world.mesh[i], T)[2] - 0.12, _geometry(world.mesh[i], T)[3] + 0.12
+    _, _, lo, hi = _geometry(world.mesh[i], T)
+    lo, hi = lo - 0.12, hi + 0.12
     out = []
     for j in movers:
         if j == i:
@@ -440,21 +434,17 @@ def _takes_grasp(world, after, i, T, movers):
         _, _, lo_j, hi_j = _geometry(world.mesh[j], world.poses[j])
         if np.any(lo_j > hi) or np.any(hi_j < lo):
             continue
-        if _pickable(world, j) and not _pickable(after, j):
+        if _room(world, j, world.poses[j]) and not _room(after, j, world.poses[j]):
             out.append(j)
     return out
-
-
-def _room(world, j, G):
-    """Whether some grasp of part j at pose G has room among the parts of `world`."""
-    return any(not _grip_blockers(world, j, G, g) for g in GRASPS.get(world.mesh[j], []))
 
 
 def _takes_slot(world, i, T, target, pending, final, below):
     """Parts of `pending` whose goal place has room for the gripper among the `final` parts
     but not once part i is at T as well: i would wall the place in, so it had better wait.
     `below[j]`: the parts j rests on in the goal, directly or not (they go first anyway)."""
-    lo, hi = _geometry(world.mesh[i], T)[2] - 0.15, _geometry(world.mesh[i], T)[3] + 0.15
+    _, _, lo, hi = _geometry(world.mesh[i], T)
+    lo, hi = lo - 0.15, hi + 0.15
     out = []
     for j in pending:
         if j == i or i in below[j]:
@@ -712,14 +702,16 @@ def _build(start, goal, target, goal_sup, mesh, grip):
             if any(i in _hangs_over(after, j) for j in goal if not is_done(j)):
                 continue  # it would hang over a part still to be moved
             if grip:
-                blockers = _move_blockers(world, i, T, after)
-                if blockers is None:
-                    blockers = _above(world, i, T)  # it comes down vertically
-                if blockers is None or not blockers:
-                    movers = [j for j in goal if not is_done(j)]
-                    blockers = _takes_grasp(world, after, i, T, movers) or None
-                if blockers is not None:  # no room for the fingers, or it would take away
-                    for j in blockers:  # another's grasp: j must go, well away from i
+                # no room for the fingers, something over the place (it comes down
+                # vertically), or it would take away another's grasp: those must go first,
+                # well away from i
+                blockers = (
+                    _move_blockers(world, i, T, after)
+                    or _hangs_over(world, i, T)
+                    or _takes_grasp(world, after, i, T, pending)
+                )
+                if blockers:
+                    for j in blockers:
                         if not is_done(j):
                             in_the_way.append((j, [world.poses[i], T], mesh[i]))
                     continue

@@ -21,6 +21,8 @@ satisfies that, the plan falls back to the geometric order alone.
 
 import numpy as np
 
+from toolbox.packing import polygon_gap
+
 SIDE = 0.04  # cube edge [m]
 HALF = SIDE / 2
 ON_GAP = 0.008  # vertical gap still read as resting on [m]
@@ -199,21 +201,9 @@ def _hand_boxes(p, axis, flip):
     return boxes
 
 
-def _polygon_gap(P, Q):
-    """Separation [m] of two convex polygons (negative: overlap), separating-axis test."""
-    best = -np.inf
-    for poly in (P, Q):
-        e = np.roll(poly, -1, axis=0) - poly
-        for n in np.stack([e[:, 1], -e[:, 0]], axis=1):
-            n = n / np.linalg.norm(n)
-            pa, pb = P @ n, Q @ n
-            best = max(best, pa.min() - pb.max(), pb.min() - pa.max())
-    return best
-
-
 def _in_the_hand(i, p, cubes):
-    """Per grasp of cube i at p: the cubes of `cubes` ({id: pose}) the gripper would touch."""
-    out = []
+    """Per grasp of cube i at p, lazily: the cubes of `cubes` ({id: pose}) the gripper would
+    touch."""
     for axis in (0, 1):
         for flip in (1.0, -1.0):
             boxes = _hand_boxes(p, axis, flip)
@@ -223,11 +213,10 @@ def _in_the_hand(i, p, cubes):
                     continue
                 corners = _corners(q)
                 for rect, z0, z1 in boxes:
-                    if q[2] + HALF > z0 and q[2] - HALF < z1 and _polygon_gap(rect, corners) < 0:
+                    if q[2] + HALF > z0 and q[2] - HALF < z1 and polygon_gap(rect, corners)[0] < 0:
                         hit.append(j)
                         break
-            out.append(hit)
-    return out
+            yield hit
 
 
 def _room(i, p, cubes):
@@ -243,7 +232,7 @@ def _move_blockers(i, p, current):
     after[i] = p
     count = {}
     for cubes, q in ((current, current[i]), (after, p)):
-        hits = _in_the_hand(i, q, cubes)
+        hits = list(_in_the_hand(i, q, cubes))
         if any(not h for h in hits):
             continue
         for h in hits:
@@ -252,23 +241,23 @@ def _move_blockers(i, p, current):
     return sorted(count, key=lambda j: (-count[j], j))
 
 
-def _takes_grasp(i, p, current, movers):
-    """Cubes of `movers` that can be picked now but not once cube i is at p."""
+def _takes_grasp(i, p, current, pickable):
+    """Cubes of `pickable` (each can be picked in `current`) that cannot once cube i is at p."""
     after = dict(current)
     after[i] = p
     return [
         j
-        for j in movers
-        if j != i
-        and np.hypot(*(current[j][:2] - p[:2])) < 0.2
-        and _room(j, current[j], current)
-        and not _room(j, current[j], after)
+        for j in pickable
+        if j != i and np.hypot(*(current[j][:2] - p[:2])) < 0.2 and not _room(j, current[j], after)
     ]
 
 
-def _temporary(i, current, pending, grip=False, movers=()):
-    """A free place on the table for cube i, as near as possible to where it is."""
+def _temporary(i, current, pending, grip=False, pickable=()):
+    """A free place on the table for cube i, as near as possible to where it is; with `grip`,
+    one the gripper can put it down at, taking no grasp from the cubes of `pickable`."""
     here = current[i]
+    if grip and not _room(i, here, current):
+        return None  # it cannot be picked where it stands
     others = [q for j, q in current.items() if j != i]
     xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
     ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
@@ -288,7 +277,9 @@ def _temporary(i, current, pending, grip=False, movers=()):
                 continue
             if any(_footprint_gap(p, g) < goal_clearance for g in pending):
                 continue
-            if grip and (_move_blockers(i, p, current) or _takes_grasp(i, p, current, movers)):
+            if grip and (
+                not _room(i, p, {**current, i: p}) or _takes_grasp(i, p, current, pickable)
+            ):
                 continue
             return p
     return None
@@ -346,13 +337,14 @@ def _build(start, goal, grip):
             (i for i in goal if not is_done(i) and all(is_done(j) for j in goal_sup[i])),
             key=lambda i: (goal[i][2], i),
         )
-        movers = [j for j in goal if not is_done(j)]
+        movers = [j for j in goal if not is_done(j)] if grip else []
+        pickable = [j for j in movers if _room(j, current[j], current)]
         move, in_the_way = None, []
         for i in ready:
             if i not in loaded and _column_free(i, goal[i], current):
                 if grip:
                     blockers = _move_blockers(i, goal[i], current)
-                    blockers = blockers or _takes_grasp(i, goal[i], current, movers)
+                    blockers = blockers or _takes_grasp(i, goal[i], current, pickable)
                     if blockers:  # no room for the gripper, or it would take a grasp away
                         in_the_way += [j for j in blockers if j not in in_the_way]
                         continue
@@ -360,12 +352,8 @@ def _build(start, goal, grip):
                 break
         if move is None:
             blocker = None
-            for j in sorted(in_the_way, key=lambda j: (is_done(j), j)):
-                if j not in loaded:  # a cube in the fingers' way (not done first)
-                    blocker = j
-                    break
-                blocker = _top_of(j, current)
-                break
+            if in_the_way:  # a cube in the fingers' way (one not done first), or what is on it
+                blocker = _top_of(min(in_the_way, key=lambda j: (is_done(j), j)), current)
             for i in ready if blocker is None else ():  # what stands in the way of a cube
                 if i in loaded:
                     blocker = _top_of(i, current)
@@ -386,7 +374,7 @@ def _build(start, goal, grip):
             if blocker is None:
                 return {"status": "infeasible", "reason": "no cube can be moved"}
             pending = [goal[i] for i in goal if not is_done(i) and i != blocker]
-            place = _temporary(blocker, current, pending, grip, movers)
+            place = _temporary(blocker, current, pending, grip, pickable)
             if place is None and grip:
                 return {"status": "infeasible", "reason": f"no room to put '{blocker}' down"}
             if place is None:
