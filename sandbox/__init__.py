@@ -1,37 +1,58 @@
 """The sandbox: runs generated drafts (and their checks) where they cannot reach the host.
 
-Design rule: one executor interface (`Executor.run(Job) -> Report`), a hardened Docker backend
-by default, and a local backend that isolates nothing, used only when named. When Docker is
-missing the sandbox raises `SandboxUnavailable` saying how to fix it; it never falls back.
+Design rule: one executor interface — `open_session(Program)` loads programs once in a fresh
+process and answers calls, `run(Job)` is one call in a session of its own — a hardened Docker
+backend by default, and a local backend that isolates nothing, used only when named. When
+Docker is missing the sandbox raises `SandboxUnavailable` saying how to fix it; it never falls
+back. Nothing but the program runs in the sandbox: whoever judges it reads the values a
+session returns, in a process of its own.
 
-    from sandbox import Job, open_executor
+    from sandbox import MESHES, Job, Program, open_executor
     with open_executor() as ex:
         report = ex.run(Job(source=src, function="render", inputs={...}, timeout_s=30))
-        report.verdict, report.output
+        with ex.open_session(Program(modules={"render": src}, meshes=meshes)) as s:
+            answer = s.call("render", "render", records, MESHES, camera, timeout_s=10)
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from sandbox.base import VERDICTS, ExceptionInfo, Executor, Job, Report, Verdict
+from sandbox.base import (
+    MESHES,
+    VERDICTS,
+    CallReport,
+    Const,
+    ExceptionInfo,
+    Executor,
+    Job,
+    Program,
+    Report,
+    Session,
+    SessionEnd,
+    Verdict,
+)
 from sandbox.errors import BadJob, ImageBuildError, SandboxError, SandboxUnavailable
-from sandbox.harness.context import EntryContext
 
 BACKENDS = ("docker", "local")
 
 __all__ = [
     "BACKENDS",
     "VERDICTS",
+    "MESHES",
     "BadJob",
-    "EntryContext",
+    "CallReport",
+    "Const",
     "ExceptionInfo",
     "Executor",
     "ImageBuildError",
     "Job",
+    "Program",
     "Report",
     "SandboxError",
     "SandboxUnavailable",
+    "Session",
+    "SessionEnd",
     "Verdict",
     "open_executor",
 ]

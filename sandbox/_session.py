@@ -1,10 +1,11 @@
-"""What both backends share: staging a job, the request/result protocol, judging the result.
+"""What both backends share: staging a program, the session protocol, judging the answers.
 
 Design rule: the host trusts nothing that comes back. It reads frames under a size cap, decodes
-outputs with `wire.decode_value` (JSON + .npz with ``allow_pickle=False``), checks every field
-of the result header, and turns anything unexpected into a verdict: a dead or garbled harness is
-``crashed`` and the next job gets a fresh one; a harness that does not answer within the job's
-budget plus a grace period is killed from here (``timeout``).
+values with `wire.decode_value` (JSON + .npz with ``allow_pickle=False``, bounded in bytes,
+elements, nesting and array shapes), checks every field of an answer header, and turns anything
+unexpected into a verdict: a dead or garbled harness is ``crashed`` and the next session gets a
+fresh one; a harness that does not answer within a call's budget plus a grace period is killed
+from here (``timeout``); a harness whose post-session wipe could not finish is replaced.
 """
 
 from __future__ import annotations
@@ -23,14 +24,27 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from sandbox.base import VERDICTS, ExceptionInfo, Executor, Job, Report, to_jsonable
+import numpy as np
+
+from sandbox.base import (
+    CallReport,
+    Const,
+    ExceptionInfo,
+    Executor,
+    Program,
+    Session,
+    SessionEnd,
+    check_limits,
+)
 from sandbox.errors import BadJob, SandboxUnavailable
 from sandbox.harness import wire
 
-GRACE_S = 30.0  # [s] on top of a job's budget before the host kills the harness
+GRACE_S = 30.0  # [s] on top of a call's budget before the host kills the harness
 START_TIMEOUT_S = 120.0  # [s] for a harness to say hello
-MAX_INPUT = 256 << 20  # [bytes]
-MAX_FIELD = 16_000  # [chars] of any text field in a result header
+CONTROL_TIMEOUT_S = 60.0  # [s] for an open/close answer beyond the program's load budget
+MAX_INPUT = 256 << 20  # [bytes] of one call's arguments, or of a program's constants
+MAX_FIELD = 16_000  # [chars] of any text field in an answer header
+_CALL_VERDICTS = ("ok", "exception", "timeout", "oom", "crashed", "bad_output", "closed")
 _LIVE: weakref.WeakSet[HarnessExecutor] = weakref.WeakSet()
 
 
@@ -58,15 +72,23 @@ class Channel(abc.ABC):
     def close(self) -> None: ...
 
 
+class _HarnessBroke(Exception):
+    """The harness died, garbled its answer or did not answer: (verdict, detail)."""
+
+    def __init__(self, verdict: str, detail: str) -> None:
+        super().__init__(detail)
+        self.verdict, self.detail = verdict, detail
+
+
 class HarnessExecutor(Executor):
     """An executor that drives a fork-server harness over a `Channel`.
 
-    Subclasses start the harness (`_open`), say where it sees the staged job files
-    (`_harness_path`), kill it (`_kill`) and explain its death (`_death`). One job runs at a
-    time per executor; run jobs in parallel with several executors.
+    Subclasses start the harness (`_open`), say where it sees the staged files
+    (`_harness_path`), kill it (`_kill`) and explain its death (`_death`). One session runs
+    at a time per executor; run sessions in parallel with several executors.
 
     Args:
-        output_limit_mb: cap on a job's output [MiB] (JSON plus arrays).
+        output_limit_mb: cap on one call's answer [MiB] (JSON plus arrays).
         tail_bytes: how much of stdout/stderr to keep [bytes].
     """
 
@@ -77,7 +99,8 @@ class HarnessExecutor(Executor):
         self.stage_root.chmod(0o755)  # the harness runs as another user
         self._channel: Channel | None = None
         self._reader = wire.FrameReader(self.output_limit + wire.MAX_HEADER + (1 << 16))
-        self._jobs = 0
+        self._sessions = 0
+        self._open_session: HarnessSession | None = None
         self.hello: dict[str, Any] = {}
         self.cold_start_s: float | None = None
         self.restarts = 0
@@ -92,7 +115,7 @@ class HarnessExecutor(Executor):
 
     @abc.abstractmethod
     def _harness_path(self, staged: Path) -> str:
-        """Where the harness sees a staged job directory."""
+        """Where the harness sees a staged program directory."""
 
     @abc.abstractmethod
     def _kill(self) -> None:
@@ -100,7 +123,13 @@ class HarnessExecutor(Executor):
 
     @abc.abstractmethod
     def _death(self) -> tuple[str, str]:
-        """(verdict, detail) for a harness that died during a job: ``oom`` or ``crashed``."""
+        """(verdict, detail) for a harness that died during a call: ``oom`` or ``crashed``."""
+
+    def _diagnostics(self) -> str:
+        return ""
+
+    def _check(self, memory_mb: int) -> None:
+        """Refuse (`BadJob`) a memory limit this executor cannot honour."""
 
     # ------------------------------------------------------------------------ lifecycle
 
@@ -134,17 +163,14 @@ class HarnessExecutor(Executor):
         return self._ask({"kind": "warm"}, timeout)
 
     def status(self, timeout: float = 30.0) -> dict[str, Any]:
-        """The harness's status: modules preloaded, preload errors, jobs run."""
+        """The harness's status: modules preloaded, preload errors, sessions run."""
         return self._ask({"kind": "status"}, timeout)
 
     def _ask(self, request: dict[str, Any], timeout: float) -> dict[str, Any]:
         self.start()
-        assert self._channel is not None
         try:
-            self._channel.send(wire.pack_frame(request))
-            header, _ = self._read(time.monotonic() + timeout)
-        except (ChannelClosed, TimeoutError, wire.FrameError, OSError) as e:
-            self._discard()
+            header, _ = self._exchange(request, (), timeout)
+        except _HarnessBroke as e:
             raise SandboxUnavailable(f"the {self.name} harness did not answer: {e}") from None
         return header
 
@@ -152,11 +178,13 @@ class HarnessExecutor(Executor):
         if self._closed:
             return
         self._closed = True
+        if self._open_session is not None:
+            self._open_session.close()
         self._discard()
         shutil.rmtree(self.stage_root, ignore_errors=True)
 
     def _discard(self) -> None:
-        """Kill the harness and forget it; the next job starts a fresh one."""
+        """Kill the harness and forget it; the next session starts a fresh one."""
         if self._channel is not None:
             try:
                 self._channel.close()
@@ -164,69 +192,81 @@ class HarnessExecutor(Executor):
                 self._channel = None
                 self._kill()
 
-    def _diagnostics(self) -> str:
-        return ""
+    # ------------------------------------------------------------------------ sessions
 
-    def _check(self, job: Job) -> None:
-        """Refuse (`BadJob`) a job this executor cannot honour."""
-
-    # ------------------------------------------------------------------------ jobs
-
-    def run(self, job: Job) -> Report:
-        if not isinstance(job, Job):
-            raise BadJob(f"run() takes a sandbox.Job, not {type(job).__name__}")
-        self._check(job)
-        staged = self._stage(job)
+    def open_session(
+        self, program: Program, *, memory_mb: int = 1024, load_timeout_s: float = 60.0
+    ) -> HarnessSession:
+        if not isinstance(program, Program):
+            raise BadJob(f"open_session() takes a sandbox.Program, not {type(program).__name__}")
+        check_limits(timeout_s=load_timeout_s, memory_mb=memory_mb)
+        self._check(memory_mb)
+        if self._open_session is not None:
+            raise BadJob("this executor already has an open session; close it first")
+        staged = self._stage(program)
+        self._sessions += 1
+        sid = staged.name
         try:
             self.start()
-            self._jobs += 1
-            return self._run_staged(job, staged)
-        finally:
+            request = {
+                "kind": "open",
+                "id": sid,
+                "dir": self._harness_path(staged),
+                "memory_mb": memory_mb,
+                "load_timeout_s": load_timeout_s,
+                "output_limit": self.output_limit,
+                "tail_bytes": self.tail_bytes,
+            }
+            try:
+                head, _ = self._exchange(request, (), load_timeout_s + GRACE_S, expect="opened")
+                load = self._call_report(head, [])
+            except _HarnessBroke as e:
+                load = CallReport(verdict=e.verdict, detail=e.detail)  # type: ignore[arg-type]
+        except BaseException:
             shutil.rmtree(staged, ignore_errors=True)
+            raise
+        session = HarnessSession(self, sid, staged, load)
+        self._open_session = session
+        return session
 
-    def _run_staged(self, job: Job, staged: Path) -> Report:
-        assert self._channel is not None
-        request = {
-            "kind": "job",
-            "id": staged.name,
-            "dir": self._harness_path(staged),
-            "timeout_s": job.timeout_s,
-            "memory_mb": job.memory_mb,
-            "output_limit": self.output_limit,
-            "tail_bytes": self.tail_bytes,
-        }
+    def _exchange(
+        self,
+        request: dict[str, Any],
+        sections: tuple[bytes, ...] | list[bytes],
+        timeout: float,
+        *,
+        expect: str | None = None,
+    ) -> tuple[dict[str, Any], list[bytes]]:
+        """Send one request, read its answer; `_HarnessBroke` when the harness does not answer
+        in time (killed), dies, or answers out of turn (restarted)."""
+        if self._channel is None:
+            raise _HarnessBroke("crashed", "the harness is gone; it restarts for the next session")
         t0 = time.monotonic()
         try:
-            self._channel.send(wire.pack_frame(request))
-            header, sections = self._read(t0 + job.timeout_s + GRACE_S)
+            self._channel.send(wire.pack_frame(request, sections))
+            header, out = self._read(t0 + timeout)
         except TimeoutError:
             self._discard()
-            return Report(
-                verdict="timeout",
-                detail=f"the harness did not answer within {job.timeout_s:g} s + "
-                f"{GRACE_S:g} s grace; killed from the host",
-                wall_time_s=time.monotonic() - t0,
-                backend=self.name,
-            )
+            raise _HarnessBroke(
+                "timeout", f"the harness did not answer within {timeout:g} s; killed from the host"
+            ) from None
         except (ChannelClosed, OSError, wire.FrameError) as e:
-            verdict, detail = self._death() if not isinstance(e, wire.FrameError) else ("", "")
+            if isinstance(e, wire.FrameError):
+                verdict, detail = "crashed", f"the harness channel broke ({e}); restarted"
+            else:
+                verdict, detail = self._death()
             self._discard()
-            if not verdict:
-                verdict, detail = "crashed", f"the harness channel broke ({e}); harness restarted"
-            return Report(
-                verdict=verdict,  # type: ignore[arg-type]
-                detail=detail,
-                wall_time_s=time.monotonic() - t0,
-                backend=self.name,
-            )
-        if header.get("kind") != "result" or header.get("id") != staged.name:
+            raise _HarnessBroke(verdict, detail) from None
+        if header.get("kind") == "error":
+            raise _HarnessBroke("crashed", f"harness error: {_text(header.get('error'))}")
+        if expect is not None and (
+            header.get("kind") != expect or header.get("id") != request.get("id")
+        ):
             self._discard()
-            return Report(
-                verdict="crashed",
-                detail=f"the harness answered out of turn ({str(header)[:200]}); restarted",
-                backend=self.name,
+            raise _HarnessBroke(
+                "crashed", f"the harness answered out of turn ({str(header)[:200]}); restarted"
             )
-        return self._judge(job, header, sections)
+        return header, out
 
     def _read(self, deadline: float) -> tuple[dict[str, Any], list[bytes]]:
         assert self._channel is not None
@@ -238,25 +278,17 @@ class HarnessExecutor(Executor):
                 raise TimeoutError("no answer before the deadline")
             self._reader.feed(self._channel.recv(left))
 
-    def _judge(self, job: Job, head: Mapping[str, Any], sections: list[bytes]) -> Report:
-        """The report for a result frame, checking every field; decodes the output."""
+    def _call_report(self, head: Mapping[str, Any], sections: list[bytes]) -> CallReport:
+        """The report for an answer header, checking every field; decodes the value."""
         verdict = head.get("verdict")
         fields: dict[str, Any] = {
             "detail": _text(head.get("detail")),
-            "stdout_tail": _text(head.get("stdout_tail")),
-            "stderr_tail": _text(head.get("stderr_tail")),
-            "stdout_bytes": _int(head.get("stdout_bytes")) or 0,
-            "stderr_bytes": _int(head.get("stderr_bytes")) or 0,
-            "wall_time_s": _num(head.get("wall_s")) or 0.0,
-            "peak_memory_mb": _num(head.get("peak_memory_mb")),
+            "seconds": _num(head.get("seconds")) or 0.0,
             "exit_code": _int(head.get("exit_code")),
             "signal": _int(head.get("signal")),
-            "backend": self.name,
         }
-        if verdict not in VERDICTS:
-            return Report(
-                verdict="crashed", **{**fields, "detail": f"unknown verdict {verdict!r:.50}"}
-            )
+        if verdict not in _CALL_VERDICTS:
+            return CallReport(verdict="crashed", **{**fields, "detail": "unknown verdict"})
         exc = head.get("exception")
         if isinstance(exc, Mapping):
             fields["exception"] = ExceptionInfo(
@@ -265,46 +297,57 @@ class HarnessExecutor(Executor):
                 traceback=_text(exc.get("traceback")),
             )
         if verdict != "ok":
-            return Report(verdict=verdict, **fields)
+            return CallReport(verdict=verdict, **fields)
+        if head.get("kind") == "opened":
+            return CallReport(verdict="ok", **fields)
         if len(sections) != 2:
-            return Report(verdict="bad_output", **{**fields, "detail": "malformed output sections"})
+            return CallReport(verdict="bad_output", **{**fields, "detail": "malformed answer"})
         try:
-            output = wire.decode_value(sections[0], sections[1], max_bytes=self.output_limit)
+            value = wire.decode_value(sections[0], sections[1], max_bytes=self.output_limit)
         except wire.BadValue as e:
-            return Report(verdict="bad_output", **{**fields, "detail": f"output {e}"})
-        if job.output_schema is not None:
-            problem = _schema_problem(output, job.output_schema)
-            if problem:
-                return Report(verdict="bad_output", **{**fields, "detail": problem})
-        return Report(verdict="ok", output=output, **fields)
+            return CallReport(verdict="bad_output", **{**fields, "detail": f"output {e}"})
+        return CallReport(verdict="ok", value=value, **fields)
 
-    def _stage(self, job: Job) -> Path:
-        """Write the job's files where the harness can read them (read-only for it)."""
-        try:
-            text, blob = wire.encode_value(dict(job.inputs), max_bytes=MAX_INPUT)
-        except wire.BadValue as e:
-            raise BadJob(f"input {e.path.replace('$', 'inputs', 1)}: {e.problem}") from None
-        staged = self.stage_root / f"j{self._jobs:05d}-{secrets.token_hex(4)}"
+    def _stage(self, program: Program) -> Path:
+        """Write the program's files where the harness can read them (read-only for it)."""
+        staged = self.stage_root / f"s{self._sessions:05d}-{secrets.token_hex(4)}"
         (staged / "src").mkdir(parents=True)
-        sources = {}
-        for name, source in job.sources.items():
-            try:
-                (staged / "src" / f"{name}.py").write_bytes(source.encode())
-            except UnicodeEncodeError as e:
-                shutil.rmtree(staged, ignore_errors=True)
-                raise BadJob(f"module {name!r}: source is not valid text ({e.reason})") from None
-            sources[name] = f"src/{name}.py"
-        (staged / "inputs.json").write_bytes(text)
-        if blob:
-            (staged / "inputs.npz").write_bytes(blob)
-        spec = {
-            "module": job.module_name,
-            "function": job.function,
-            "entry": job.entry,
-            "sources": sources,
-            "inputs": {"json": "inputs.json", "npz": "inputs.npz" if blob else None},
-        }
-        (staged / "job.json").write_text(json.dumps(spec))
+        try:
+            sources = {}
+            for name, source in program.modules.items():
+                try:
+                    (staged / "src" / f"{name}.py").write_bytes(source.encode())
+                except UnicodeEncodeError as e:
+                    raise BadJob(f"module {name!r}: source is not valid text ({e.reason})") from None
+                sources[name] = f"src/{name}.py"
+            spec: dict[str, Any] = {"sources": sources}
+            constants, kinds = dict(program.constants), dict.fromkeys(program.constants, "value")
+            if program.meshes is not None:
+                constants["meshes"] = {
+                    str(k): {
+                        "vertices": np.asarray(m.vertices, np.float64),
+                        "faces": np.asarray(m.faces, np.int64),
+                    }
+                    for k, m in program.meshes.items()
+                }
+                kinds["meshes"] = "meshes"
+            if constants:
+                try:
+                    text, blob = wire.encode_value(constants, max_bytes=MAX_INPUT)
+                except wire.BadValue as e:
+                    raise BadJob(f"constant {e.path.replace('$', 'constants', 1)}: {e.problem}") from None
+                (staged / "constants.json").write_bytes(text)
+                if blob:
+                    (staged / "constants.npz").write_bytes(blob)
+                spec["constants"] = {
+                    "json": "constants.json",
+                    "npz": "constants.npz" if blob else None,
+                    "kinds": kinds,
+                }
+            (staged / "program.json").write_text(json.dumps(spec))
+        except BaseException:
+            shutil.rmtree(staged, ignore_errors=True)
+            raise
         for path in [staged, staged / "src"]:
             path.chmod(0o755)
         for path in staged.rglob("*"):
@@ -313,22 +356,117 @@ class HarnessExecutor(Executor):
         return staged
 
 
-def _schema_problem(output: Any, schema: Mapping[str, Any]) -> str:
-    import jsonschema
+class HarnessSession(Session):
+    """A session of a `HarnessExecutor` (see `sandbox.base.Session`)."""
 
-    try:
-        validator = jsonschema.Draft202012Validator(schema)
-        error = jsonschema.exceptions.best_match(validator.iter_errors(to_jsonable(output)))
-    except jsonschema.exceptions.SchemaError as e:
-        raise BadJob(f"output_schema is not a valid JSON Schema: {e.message}") from None
-    if error is None:
-        return ""
-    path = "output" + "".join(f"[{p!r}]" if isinstance(p, int) else f".{p}" for p in error.path)
-    return f"schema: {path}: {error.message}"[:MAX_FIELD]
+    def __init__(
+        self, executor: HarnessExecutor, sid: str, staged: Path, load: CallReport
+    ) -> None:
+        self.executor = executor
+        self.id = sid
+        self.staged = staged
+        self.load = load
+        self.dead = "" if load.ok else f"the program did not load ({load.verdict})"
+        self._end: SessionEnd | None = None
+        self.calls = 0
+
+    def call(
+        self, module: str, function: str, *args: Any, timeout_s: float, **kwargs: Any
+    ) -> CallReport:
+        return self._request("call", module, function, args, kwargs, timeout_s)
+
+    def attribute(self, module: str, name: str, *, timeout_s: float = 10.0) -> CallReport:
+        return self._request("attribute", module, name, (), {}, timeout_s)
+
+    def signature(self, module: str, function: str, *, timeout_s: float = 10.0) -> CallReport:
+        return self._request("signature", module, function, (), {}, timeout_s)
+
+    def _request(
+        self,
+        op: str,
+        module: str,
+        function: str,
+        args: Any,
+        kwargs: Mapping[str, Any],
+        timeout_s: float,
+    ) -> CallReport:
+        check_limits(timeout_s=timeout_s)
+        if self._end is not None:
+            raise BadJob("call() on a closed session")
+        if self.dead:
+            return CallReport(verdict="closed", detail=self.dead)
+        try:
+            text, blob = wire.encode_value(
+                {"args": _consts(list(args)), "kwargs": _consts(kwargs)}, max_bytes=MAX_INPUT
+            )
+        except wire.BadValue as e:
+            raise BadJob(f"call argument {e.path.replace('$', 'arguments', 1)}: {e.problem}") from None
+        ex = self.executor
+        self.calls += 1
+        request = {
+            "kind": "call",
+            "id": self.id,
+            "module": module,
+            "function": function,
+            "op": op,
+            "timeout_s": timeout_s,
+        }
+        try:
+            head, sections = ex._exchange(request, (text, blob), timeout_s + GRACE_S)
+        except _HarnessBroke as e:
+            self.dead = e.detail
+            return CallReport(verdict=e.verdict, detail=e.detail)  # type: ignore[arg-type]
+        if head.get("kind") != "answer" or head.get("id") != self.id:
+            ex._discard()
+            self.dead = "the harness answered out of turn; restarted"
+            return CallReport(verdict="crashed", detail=self.dead)
+        report = ex._call_report(head, sections)
+        if head.get("alive") is not True:
+            self.dead = self.dead or report.detail or report.verdict
+        return report
+
+    def close(self) -> SessionEnd:
+        if self._end is not None:
+            return self._end
+        ex = self.executor
+        end = SessionEnd()
+        try:
+            if ex._channel is not None:
+                head, _ = ex._exchange(
+                    {"kind": "close", "id": self.id}, (), CONTROL_TIMEOUT_S, expect="closed"
+                )
+                end = SessionEnd(
+                    stdout_tail=_text(head.get("stdout_tail")),
+                    stderr_tail=_text(head.get("stderr_tail")),
+                    stdout_bytes=_int(head.get("stdout_bytes")) or 0,
+                    stderr_bytes=_int(head.get("stderr_bytes")) or 0,
+                    wall_time_s=_num(head.get("wall_s")) or 0.0,
+                    peak_memory_mb=_num(head.get("peak_memory_mb")),
+                )
+                if head.get("dirty"):  # the wipe could not finish: never reuse this container
+                    ex._discard()
+        except _HarnessBroke:
+            pass  # the harness is gone (discarded); the next session starts a fresh one
+        finally:
+            self._end = end
+            ex._open_session = None
+            shutil.rmtree(self.staged, ignore_errors=True)
+        return end
+
+
+def _consts(value: Any) -> Any:
+    """Call arguments with `Const` markers as the wire's constant references."""
+    if isinstance(value, Const):
+        return {wire.CONST_KEY: value.name}
+    if isinstance(value, Mapping):
+        return {k: _consts(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_consts(v) for v in value]
+    return value
 
 
 def _text(value: Any) -> str:
-    return value[:MAX_FIELD] if isinstance(value, str) else ""
+    return wire.clean_text(value[:MAX_FIELD]) if isinstance(value, str) else ""
 
 
 def _int(value: Any) -> int | None:
@@ -337,7 +475,7 @@ def _int(value: Any) -> int | None:
 
 def _num(value: Any) -> float | None:
     ok = isinstance(value, int | float) and not isinstance(value, bool)
-    return float(value) if ok else None
+    return float(value) if ok and np.isfinite(value) else None
 
 
 def minimal_env(extra: Mapping[str, str] | None = None) -> dict[str, str]:

@@ -4,17 +4,19 @@ The container runs the fork-server harness as PID 1; the host talks to it over t
 attached stdin/stdout (no `docker exec`, no network, no writable mount). Job files are staged in
 a host directory mounted read-only at /in. Hardening, all by default: no network, read-only root
 file system, size-capped tmpfs /tmp (noexec) and /dev/shm, uid 10001, every capability dropped,
-no-new-privileges, Docker's default seccomp profile, pids/memory (swap = memory)/CPU limits,
-no host environment variables, private IPC, no core dumps, no logging of the channel. Containers
+no-new-privileges, the project's own seccomp profile (`sandbox.seccomp`: Docker's denials and
+more — io_uring, System V and POSIX IPC, sockets other than unix/inet/inet6, namespaces),
+pids/memory (swap = memory)/CPU limits, no host environment variables, a private IPC namespace,
+no core dumps, no logging of the channel. Containers
 carry the label ``rivet.sandbox=1`` and their owner; leftovers whose owner is gone are reaped
 whenever an executor starts.
 
 What it does NOT isolate: the host kernel is shared (a kernel exploit is an escape; seccomp and
 dropped capabilities narrow the surface, nothing more); timing and cache side channels; what
 /proc and /sys show about the host (kernel version, CPU model, load, uptime); disk and memory
-bandwidth. Inside the container, a draft can read everything in the image (the harness,
-`contracts`, `toolbox`: public anyway) and the current job's inputs, and it shares its process
-with an entry point run on it (see `sandbox.harness.context`).
+bandwidth. Inside the container, a program can read everything in the image (the harness,
+`contracts`, `geometry`, `toolbox`: public anyway) and its own inputs; nothing that judges it
+runs there.
 """
 
 from __future__ import annotations
@@ -28,12 +30,12 @@ from pathlib import Path
 from typing import Any
 
 from sandbox._session import Channel, ChannelClosed, HarnessExecutor
-from sandbox.base import Job
+from sandbox import seccomp
 from sandbox.errors import BadJob, SandboxUnavailable
 from sandbox.image import LABEL, docker_client, has_image, image_tag
 
-_MUX = struct.Struct(">BxxxI")
-HARNESS_MB = 1024  # [MiB] kept for the warm harness (about 400 MiB resident) and the job's slack  # Docker's attach stream header: stream id, payload size
+_MUX = struct.Struct(">BxxxI")  # Docker's attach stream header: stream id, payload size
+HARNESS_MB = 1024  # [MiB] kept for the warm harness (about 400 MiB resident) and the job's slack
 
 
 class _AttachChannel(Channel):
@@ -147,7 +149,7 @@ class DockerExecutor(HarnessExecutor):
             "read_only": True,
             "user": "10001:10001",
             "cap_drop": ["ALL"],
-            "security_opt": ["no-new-privileges:true"],
+            "security_opt": ["no-new-privileges:true", f"seccomp={seccomp.profile_json()}"],
             "pids_limit": lim["pids_limit"],
             "mem_limit": f"{lim['memory_mb']}m",
             "memswap_limit": f"{lim['memory_mb']}m",
@@ -186,12 +188,12 @@ class DockerExecutor(HarnessExecutor):
     def _harness_path(self, staged: Path) -> str:
         return f"/in/{staged.name}"
 
-    def _check(self, job: Job) -> None:
+    def _check(self, memory_mb: int) -> None:
         room = self.limits["memory_mb"] - HARNESS_MB
-        if job.memory_mb > room:
+        if memory_mb > room:
             raise BadJob(
-                f"the job asks for {job.memory_mb} MiB but this executor's container leaves "
-                f"{room} MiB for jobs; open it with memory_mb={job.memory_mb + HARNESS_MB} or more"
+                f"the program asks for {memory_mb} MiB but this executor's container leaves "
+                f"{room} MiB for programs; open it with memory_mb={memory_mb + HARNESS_MB} or more"
             )
 
     def close(self) -> None:

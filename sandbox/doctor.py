@@ -1,10 +1,12 @@
 """`rivet sandbox doctor`: the isolation actually in force, every item tested live.
 
-Design rule: nothing is inferred from configuration alone. The probe entry point
-(`sandbox.harness.probe`) runs as a real job and tries each escape; then real jobs check that
-the limits bite (a sleeper is killed, a memory bomb is stopped, a thread bomb hits the pids
-limit, an oversized output is refused, a fake secret set on the host is not visible). The
-container's configuration is listed beside them for reference.
+Design rule: nothing is inferred from configuration alone. The probe (`sandbox/harness/probe.py`,
+sent as an ordinary draft) tries each escape from where a draft runs; then real jobs check that
+the limits bite (a sleeper and a spinner that ignores its alarm are killed from outside, a
+memory bomb is stopped, a job that lowers its OOM preference still cannot take the harness
+down, a thread bomb hits the pids limit, an oversized output is refused, a fake secret set on
+the host is not visible) and that two jobs share nothing (scratch files however deep or
+locked, processes). The container's configuration is listed beside them for reference.
 """
 
 from __future__ import annotations
@@ -17,6 +19,9 @@ from typing import Any
 
 from sandbox.base import Job
 from sandbox.docker_backend import DockerExecutor
+from sandbox.harness.server import ENV_KEEP
+
+PROBE = Path(__file__).resolve().parent / "harness" / "probe.py"
 
 CANARY_VAR = "RIVET_DOCTOR_CANARY"
 
@@ -49,20 +54,31 @@ def _checks(ex: DockerExecutor, canary: str) -> list[Item]:
     host_paths = sorted({str(Path.cwd()), str(ex.stage_root), str(Path(__file__).resolve())})
     probe = ex.run(
         Job(
-            source="",
-            function="probe",
-            entry="sandbox.harness.probe:run",
-            inputs={"host_paths": host_paths, "canary": canary},
+            source=PROBE.read_text(),
+            module_name="probe",
+            function="run",
+            inputs={"host_paths": host_paths, "canary": canary, "env_keep": list(ENV_KEEP)},
             timeout_s=60,
         )
     )
     if probe.ok:
-        items += [Item(**item) for item in probe.output["items"]]
+        for item in probe.output["items"]:
+            if item["name"] == "IPC namespace":  # compared with the host's here
+                host = os.readlink("/proc/self/ns/ipc")
+                item = {
+                    **item,
+                    "name": "private IPC namespace",
+                    "ok": item["detail"] != host,
+                    "detail": f"sandbox {item['detail']}, host {host}",
+                }
+            items.append(Item(**item))
     else:
         items.append(
             Item(name="isolation probe ran", ok=False, detail=f"{probe.verdict}: {probe.detail}")
         )
     items += [_enforced(ex, name, job, want, check) for name, job, want, check in _LIMIT_JOBS]
+    items.append(_harness_kept(ex))
+    items.append(_nothing_shared(ex))
     items.append(_next_job_works(ex))
     items += _config(ex)
     return items
@@ -77,12 +93,83 @@ def _enforced(ex: DockerExecutor, name: str, job: Job, want: str, check: Any) ->
     )
 
 
+def _harness_kept(ex: DockerExecutor) -> Item:
+    """A job that gives up its OOM preference and exhausts the container's memory with shared
+    pages (which its own memory limit does not count): the job ends, the harness stays."""
+    before = ex.restarts
+    report = ex.run(Job(source=_OOM_AS_EQUAL, function="f", timeout_s=60))
+    after = ex.run(Job(source="def f():\n    return 1\n", function="f"))
+    kept = ex.restarts == before and after.ok
+    return Item(
+        name="a job that lowers its OOM preference cannot take the harness down",
+        ok=report.verdict in ("oom", "crashed") and kept,
+        detail=f"job {report.verdict} ({report.detail[:80]}); harness restarts "
+        f"{ex.restarts - before}; next job {after.verdict}",
+    )
+
+
+def _nothing_shared(ex: DockerExecutor) -> Item:
+    """A job that leaves scratch files (1,100 levels deep, chmod 000, in /tmp and /dev/shm) and
+    a daemon behind; the next job must find none of it."""
+    mess = ex.run(Job(source=_MESS, function="f", timeout_s=60))
+    check = ex.run(Job(source=_AFTERCHECK, function="f", timeout_s=30))
+    clean = {"others": [], "tmp": [], "shm": []}
+    return Item(
+        name="two jobs share no files or processes",
+        ok=mess.ok and check.ok and check.output == clean,
+        detail=f"left behind: {mess.output}; the next job saw {check.output or check.detail}",
+    )
+
+
+_OOM_AS_EQUAL = """
+import mmap
+def f():
+    with open("/proc/self/oom_score_adj", "w") as fh:
+        fh.write("0")
+    maps = []
+    while True:
+        m = mmap.mmap(-1, 64 << 20)
+        for i in range(0, len(m), 4096):
+            m[i] = 1
+        maps.append(m)
+"""
+
+_MESS = """
+import os, subprocess
+def f():
+    os.makedirs("/tmp/locked/inner", exist_ok=True)
+    open("/tmp/locked/inner/file", "w").write("x")
+    os.chmod("/tmp/locked/inner", 0)
+    os.chmod("/tmp/locked", 0)
+    here = os.open("/tmp", os.O_RDONLY)
+    for _ in range(1100):  # deeper than PATH_MAX
+        os.mkdir("d", dir_fd=here)
+        nxt = os.open("d", os.O_RDONLY, dir_fd=here)
+        os.close(here)
+        here = nxt
+    os.close(here)
+    open("/dev/shm/left", "w").write("x" * 4096)
+    subprocess.Popen(["sleep", "1000"], start_new_session=True)
+    return {"tmp": sorted(os.listdir("/tmp")), "shm": sorted(os.listdir("/dev/shm"))}
+"""
+
+_AFTERCHECK = """
+import os
+def f():
+    me = os.getpid()
+    pids = sorted(int(p) for p in os.listdir("/proc") if p.isdigit())
+    tmp = sorted(set(os.listdir("/tmp")) - {os.path.basename(os.getcwd())})
+    return {"others": [p for p in pids if p not in (1, me)], "tmp": tmp,
+            "shm": sorted(os.listdir("/dev/shm"))}
+"""
+
+
 def _next_job_works(ex: DockerExecutor) -> Item:
     report = ex.run(Job(source="def f(x):\n    return x + 1\n", function="f", inputs={"x": 41}))
     return Item(
         name="the next job still works",
         ok=report.ok and report.output == 42,
-        detail=f"{report.verdict} in {report.wall_time_s * 1000:.0f} ms",
+        detail=f"{report.verdict} in {report.wall_time_s * 1000:.0f} ms {report.detail}",
     )
 
 
@@ -106,6 +193,17 @@ _LIMIT_JOBS: list[tuple[str, Job, str, Any]] = [
         Job(source="import time\ndef f():\n    time.sleep(3600)\n", function="f", timeout_s=1),
         "timeout",
         None,
+    ),
+    (
+        "per-call time limit enforced from outside the program (it ignores its alarm)",
+        Job(
+            source="import signal\ndef f():\n    signal.signal(signal.SIGALRM, signal.SIG_IGN)\n"
+            "    while True:\n        pass\n",
+            function="f",
+            timeout_s=1,
+        ),
+        "timeout",
+        lambda r: r.wall_time_s < 5,
     ),
     (
         "job memory limit enforced",
@@ -139,6 +237,12 @@ def _config(ex: DockerExecutor) -> list[Item]:
             "no-new-privileges:true" in (host.get("SecurityOpt") or []),
             host.get("SecurityOpt"),
         ),
+        (
+            "config: the project's seccomp profile",
+            any(o.startswith("seccomp=") for o in host.get("SecurityOpt") or []),
+            "sandbox.seccomp",
+        ),
+        ("config: private IPC", host.get("IpcMode") == "private", host.get("IpcMode")),
         (
             "config: memory = memory+swap",
             host.get("Memory") and host.get("Memory") == host.get("MemorySwap"),

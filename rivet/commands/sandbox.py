@@ -38,11 +38,6 @@ def register(subparsers: Any) -> None:
         metavar="NAME=FILE.py",
         help="an extra module the draft may import (repeatable)",
     )
-    run.add_argument(
-        "--entry",
-        default="call",
-        help="'call' (default) or an in-image entry point 'package.module:function'",
-    )
     run.set_defaults(handler=run_command)
 
     doctor = sub.add_parser("doctor", help="test every isolation item live and print pass/fail")
@@ -58,13 +53,13 @@ def run_command(args: argparse.Namespace) -> int:
         inputs=_inputs(args.input),
         modules=dict(_module(spec) for spec in args.module),
         module_name=_module_name(args.file),
-        entry=args.entry,
         timeout_s=args.timeout,
         memory_mb=args.memory,
     )
     with open_executor(args.sandbox) as executor:
         report = executor.run(job)
-    print(json.dumps(report.to_dict(), indent=2))
+    # strict JSON (no bare NaN), escape sequences made visible, big arrays summarised
+    print(json.dumps(report.to_dict(max_elements=10_000), indent=2, allow_nan=False))
     return 0 if report.ok else 1
 
 

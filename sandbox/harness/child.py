@@ -1,16 +1,19 @@
-"""The forked child: load a job's draft modules from source, run it, report on a private pipe.
+"""The forked child: load a program's modules from source, then answer calls until told to stop.
 
-Design rule: the child reports, the parent judges. The child writes exactly one frame to the
-result pipe (returned / raised / unencodable) and exits; everything else it prints goes to the
-captured stdout/stderr and is never parsed. Draft code runs in this same process, so it can
-forge this frame; forging only ever yields the draft's own output, which the host validates
-like any other, and the exit status and timing are observed by the parent, not reported.
+Design rule: the child answers, the parent judges. The child writes one frame to its result pipe
+when the program has loaded (ready / raised) and one frame per call request it reads from its
+request pipe (returned / raised / unencodable); everything else it prints goes to the captured
+stdout/stderr and is never parsed. Draft code runs in this same process, so it can write any
+bytes it likes to the result pipe: whatever comes back is only ever taken as the draft's own
+answer to the call in progress, and the parent alone measures time, watches the exit status and
+the memory, and refuses anything out of turn.
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import fcntl
 import importlib
 import importlib.abc
 import importlib.util
@@ -27,68 +30,91 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from . import wire
-from .context import EntryContext
 
 RESULT_FD = 3
+REQUEST_FD = 4
 _PR_SET_DUMPABLE = 4
 MAX_MESSAGE = 4000  # [chars]
 MAX_TRACEBACK = 8000  # [chars]
-MAX_JOB_FILE = 1 << 20  # [bytes] job.json
-MAX_INPUT = 256 << 20  # [bytes] inputs, as the host caps them
+MAX_PROGRAM_FILE = 1 << 20  # [bytes] program.json
+MAX_SOURCE = 16 << 20  # [bytes] one module's source
+MAX_CONSTANTS = 256 << 20  # [bytes] constants, as the host caps them
 _HARNESS_DIR = str(Path(__file__).resolve().parent)
 
 
-def run(
+def serve(
     *,
-    job_dir: str,
+    program_dir: str,
     tmp_dir: str,
     result_fd: int,
+    request_fd: int,
     out_fd: int,
     err_fd: int,
     memory_mb: int,
     output_limit: int,
+    request_limit: int,
 ) -> NoReturn:
-    """Set the child up, run the job, write one frame to the result pipe and exit."""
+    """Set the child up, load the program, answer calls until the request pipe closes."""
     try:
-        _isolate(result_fd, out_fd, err_fd, memory_mb)
+        _isolate(result_fd, request_fd, out_fd, err_fd, memory_mb)
         os.chdir(tmp_dir)
         os.environ["TMPDIR"] = os.environ["HOME"] = tmp_dir
         tempfile.tempdir = None
-        frame = _run_job(job_dir, tmp_dir, output_limit)
-    except BaseException as e:  # the harness itself failed before the job started
-        frame = wire.pack_frame({"status": "raised", **_describe(e, set())})
+        program = _Program.load(program_dir)
+        frame = wire.pack_frame({"status": "ready"})
+    except BaseException as e:  # the harness or the program's import failed
+        _write(wire.pack_frame({"status": "raised", **_describe(e, _draft_files(program_dir))}))
+        os._exit(0)
+    _write(frame)
+    reader = wire.FrameReader(request_limit)
+    while True:
+        request = _next_request(reader)
+        if request is None:
+            os._exit(0)
+        _write(program.answer(*request, output_limit=output_limit))
+
+
+def _write(frame: bytes) -> None:
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(BaseException):
             stream.flush()
-    try:
-        view = memoryview(frame)
-        while view:
-            view = view[os.write(RESULT_FD, view) :]
-    finally:
-        os._exit(0)
+    view = memoryview(frame)
+    while view:
+        view = view[os.write(RESULT_FD, view) :]
 
 
-def _isolate(result_fd: int, out_fd: int, err_fd: int, memory_mb: int) -> None:
-    """Own session, only the four descriptors it needs, default signals, a memory limit."""
+def _next_request(reader: wire.FrameReader) -> tuple[dict[str, Any], list[bytes]] | None:
+    while True:
+        for frame in reader.frames():
+            return frame
+        data = os.read(REQUEST_FD, 1 << 20)
+        if not data:
+            return None
+        reader.feed(data)
+
+
+def _isolate(result_fd: int, request_fd: int, out_fd: int, err_fd: int, memory_mb: int) -> None:
+    """Own session, only the descriptors it needs, default signals, a memory limit."""
     # The harness is non-dumpable (so jobs cannot reach into it) and a fork inherits that;
-    # the job itself may be dumpable, which gives it back its own /proc/self files.
+    # the program itself may be dumpable, which gives it back its own /proc/self files.
     ctypes.CDLL(None).prctl(_PR_SET_DUMPABLE, 1, 0, 0, 0)
     os.setsid()
+    # Every end moves above the fixed numbers first, so that no dup2 below clobbers another.
+    high = [fcntl.fcntl(fd, fcntl.F_DUPFD, 64) for fd in (out_fd, err_fd, result_fd, request_fd)]
     null = os.open(os.devnull, os.O_RDONLY)
     os.dup2(null, 0)
-    os.dup2(out_fd, 1)
-    os.dup2(err_fd, 2)
-    os.dup2(result_fd, RESULT_FD)
-    os.closerange(RESULT_FD + 1, resource.getrlimit(resource.RLIMIT_NOFILE)[0])
+    for fd, target in zip(high, (1, 2, RESULT_FD, REQUEST_FD), strict=True):
+        os.dup2(fd, target)
+    os.closerange(REQUEST_FD + 1, resource.getrlimit(resource.RLIMIT_NOFILE)[0])
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGQUIT, signal.SIGHUP, signal.SIGCHLD):
         signal.signal(sig, signal.SIG_DFL)
-    try:  # the kernel's OOM killer takes the job, not the harness
+    try:  # the kernel's OOM killer takes the program, not the harness
         with open("/proc/self/oom_score_adj", "w") as f:
             f.write("1000")
     except OSError:
         pass
-    # RLIMIT_DATA counts what the job allocates (heap, anonymous maps), not the address space
-    # of the shared libraries the harness already mapped.
+    # RLIMIT_DATA counts what the program allocates (heap, anonymous maps), not the address
+    # space of the shared libraries the harness already mapped.
     data = _status_kib("VmData") * 1024 + memory_mb * (1 << 20)
     resource.setrlimit(resource.RLIMIT_DATA, (data, data))
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
@@ -102,39 +128,136 @@ def _status_kib(key: str) -> int:
     return 0
 
 
-def _run_job(job_dir: str, tmp_dir: str, output_limit: int) -> bytes:
-    root = Path(job_dir)
-    spec = json.loads(_read(root / "job.json", MAX_JOB_FILE))
-    sources = {
-        name: _read(root / file, MAX_JOB_FILE * 16).decode()
-        for name, file in spec["sources"].items()
-    }
-    files = {f"{name}.py" for name in sources}
-    try:
-        entry = _resolve_entry(spec["entry"])
-        modules = _load_modules(spec["module"], sources)
-        inputs = _load_inputs(root, spec.get("inputs"), MAX_INPUT)
-        if entry is None:
-            fn = getattr(modules[spec["module"]], spec["function"], None)
-            if not callable(fn):
-                raise AttributeError(f"the draft defines no function {spec['function']!r}")
-            value = fn(**inputs)
-        else:
-            ctx = EntryContext(
-                draft=modules[spec["module"]],
-                modules=modules,
-                function=spec["function"],
-                inputs=inputs,
-                tmp_dir=tmp_dir,
-            )
-            value = entry(ctx)
-        text, blob = wire.encode_value(value, max_bytes=output_limit)
-    except wire.BadValue as e:
-        problem = f"{e.path.replace('$', 'output', 1)}: {e.problem}"
-        return wire.pack_frame({"status": "unencodable", "problem": problem[:MAX_MESSAGE]})
-    except BaseException as e:
-        return wire.pack_frame({"status": "raised", **_describe(e, files)})
-    return wire.pack_frame({"status": "returned"}, [text, blob])
+class _Program:
+    """The loaded modules and the constants calls may refer to."""
+
+    def __init__(self, modules: dict[str, Any], constants: dict[str, Any], files: set[str]):
+        self.modules = modules
+        self.constants = constants
+        self.files = files
+
+    @staticmethod
+    def load(program_dir: str) -> _Program:
+        root = Path(program_dir)
+        spec = json.loads(_read(root / "program.json", MAX_PROGRAM_FILE))
+        sources = {
+            name: _read(root / file, MAX_SOURCE).decode() for name, file in spec["sources"].items()
+        }
+        constants: dict[str, Any] = {}
+        if spec.get("constants"):
+            text = _read(root / spec["constants"]["json"], MAX_CONSTANTS)
+            npz = spec["constants"].get("npz")
+            blob = _read(root / npz, MAX_CONSTANTS) if npz else b""
+            raw = wire.decode_value(text, blob, max_bytes=2 * MAX_CONSTANTS)
+            for name, kind in spec["constants"]["kinds"].items():
+                constants[name] = _materialize(kind, raw[name])
+        modules = _load_modules(sources)
+        return _Program(modules, constants, {f"{name}.py" for name in sources})
+
+    def answer(
+        self, header: Mapping[str, Any], sections: list[bytes], *, output_limit: int
+    ) -> bytes:
+        """The frame answering one request: ``op`` "call" (the default) calls a function,
+        "attribute" returns a module attribute's value, "signature" describes a function."""
+        try:
+            op = header.get("op", "call")
+            if op == "attribute":
+                value = self._attribute(header)
+            elif op == "signature":
+                value = self._signature(header)
+            else:
+                fn = self._function(header)
+                if len(sections) != 2:
+                    raise ValueError("a call request carries its arguments in two sections")
+                args = wire.decode_value(sections[0], sections[1], max_bytes=1 << 40)
+                value = fn(*self._resolve(args["args"]), **self._resolve(args["kwargs"]))
+            text, blob = wire.encode_value(value, max_bytes=output_limit)
+        except wire.BadValue as e:
+            problem = f"{e.path.replace('$', 'output', 1)}: {e.problem}"
+            return wire.pack_frame({"status": "unencodable", "problem": problem[:MAX_MESSAGE]})
+        except BaseException as e:
+            return wire.pack_frame({"status": "raised", **_describe(e, self.files)})
+        return wire.pack_frame({"status": "returned"}, [text, blob])
+
+    def _module(self, header: Mapping[str, Any]) -> Any:
+        module = self.modules.get(header.get("module"))
+        if module is None:
+            raise ImportError(f"the program has no module {header.get('module')!r}")
+        return module
+
+    def _attribute(self, header: Mapping[str, Any]) -> Any:
+        name = str(header.get("function"))
+        module = self._module(header)
+        if not hasattr(module, name):
+            raise AttributeError(f"module {module.__name__!r} has no attribute {name!r}")
+        return getattr(module, name)
+
+    def _signature(self, header: Mapping[str, Any]) -> dict[str, Any]:
+        """{"callable", "params": [{"name", "kind", "default"}] or None, "functions"}."""
+        import inspect
+
+        module = self._module(header)
+        fn = getattr(module, str(header.get("function")), None)
+        params = None
+        if callable(fn):
+            try:
+                params = [
+                    {"name": p.name, "kind": p.kind.name, "default": p.default is not p.empty}
+                    for p in inspect.signature(fn).parameters.values()
+                ]
+            except (TypeError, ValueError):  # a builtin: nothing to compare
+                params = None
+        functions = sorted(
+            n for n, v in vars(module).items() if inspect.isfunction(v) and not n.startswith("_")
+        )
+        return {"callable": callable(fn), "params": params, "functions": functions}
+
+    def _function(self, header: Mapping[str, Any]) -> Any:
+        module = self.modules.get(header.get("module"))
+        if module is None:
+            raise ImportError(f"the program has no module {header.get('module')!r}")
+        name = str(header.get("function"))
+        fn = getattr(module, name, None)
+        if not callable(fn):
+            raise AttributeError(f"module {module.__name__!r} defines no function {name!r}")
+        return fn
+
+    def _resolve(self, value: Any) -> Any:
+        """Arguments with ``{"__const__": name}`` replaced by a fresh copy of that constant."""
+        if isinstance(value, dict):
+            if set(value) == {wire.CONST_KEY}:
+                name = value[wire.CONST_KEY]
+                if name not in self.constants:
+                    raise KeyError(f"the program has no constant {name!r}")
+                return _fresh(self.constants[name])
+            return {k: self._resolve(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [self._resolve(v) for v in value]
+        return value
+
+
+def _materialize(kind: str, value: Any) -> Any:
+    """A constant of a known kind from its wire form."""
+    if kind == "value":
+        return value
+    if kind == "meshes":  # {key: {"vertices" (n, 3), "faces" (m, 3)}} → {key: trimesh.Trimesh}
+        import trimesh
+
+        return {
+            key: trimesh.Trimesh(vertices=m["vertices"], faces=m["faces"], process=False)
+            for key, m in value.items()
+        }
+    raise ValueError(f"unknown constant kind {kind!r}")
+
+
+def _fresh(value: Any) -> Any:
+    """A copy a program may modify without changing what the next call gets."""
+    if isinstance(value, dict):
+        return {k: _fresh(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_fresh(v) for v in value]
+    copy = getattr(value, "copy", None)
+    return copy() if callable(copy) else value
 
 
 def _read(path: Path, limit: int) -> bytes:
@@ -145,32 +268,26 @@ def _read(path: Path, limit: int) -> bytes:
         return f.read(size)
 
 
-def _resolve_entry(entry: str) -> Any:
-    """None for "call"; else the function named by "pkg.mod:fn", imported from the image."""
-    if entry == "call":
-        return None
-    module_name, _, attr = entry.partition(":")
-    fn = getattr(importlib.import_module(module_name), attr, None)
-    if not callable(fn):
-        raise AttributeError(f"entry point {entry!r} is not a function")
-    return fn
+def _draft_files(program_dir: str) -> set[str]:
+    try:
+        spec = json.loads(_read(Path(program_dir) / "program.json", MAX_PROGRAM_FILE))
+        return {f"{name}.py" for name in spec["sources"]}
+    except BaseException:
+        return set()
 
 
-def _load_modules(main: str, sources: Mapping[str, str]) -> dict[str, Any]:
-    """Import the job's modules from source; they may import each other by name."""
+def _load_modules(sources: Mapping[str, str]) -> dict[str, Any]:
+    """Import the program's modules from source, in order; they may import each other by name."""
     clash = sorted(name for name in sources if name in sys.modules)
     if clash:
         raise ImportError(
-            f"module names {clash} are taken in the sandbox; rename the draft modules"
+            f"module names {clash} are taken in the sandbox; rename the program's modules"
         )
     for name, source in sources.items():
         lines = source.splitlines(keepends=True)
         linecache.cache[f"{name}.py"] = (len(source), None, lines, f"{name}.py")
     sys.meta_path.insert(0, _SourceFinder(sources))
-    modules = {main: importlib.import_module(main)}
-    for name in sources:
-        modules[name] = importlib.import_module(name)
-    return modules
+    return {name: importlib.import_module(name) for name in sources}
 
 
 class _SourceFinder(importlib.abc.MetaPathFinder):
@@ -200,19 +317,8 @@ class _SourceLoader(importlib.abc.Loader):
         return self.source
 
 
-def _load_inputs(root: Path, files: Any, limit: int) -> dict[str, Any]:
-    if not files:
-        return {}
-    text = _read(root / files["json"], limit)
-    blob = _read(root / files["npz"], limit) if files.get("npz") else b""
-    inputs = wire.decode_value(text, blob, max_bytes=2 * limit)
-    if not isinstance(inputs, dict):
-        raise TypeError("job inputs are not a mapping of argument names to values")
-    return inputs
-
-
 def _describe(e: BaseException, draft_files: set[str]) -> dict[str, Any]:
-    """The exception as type, message and a traceback trimmed to the draft's frames."""
+    """The exception as type, message and a traceback trimmed to the program's frames."""
     kind = type(e)
     name = (
         kind.__qualname__
@@ -226,9 +332,9 @@ def _describe(e: BaseException, draft_files: set[str]) -> dict[str, Any]:
     try:
         frames = traceback.extract_tb(e.__traceback__)
         keep = [f for f in frames if f.filename in draft_files]
-        if not keep:  # not raised through the draft: show where it was raised, harness excluded
+        if not keep:  # not raised through the program: where it was raised, harness excluded
             keep = [f for f in frames if not f.filename.startswith((_HARNESS_DIR, "<frozen"))][-3:]
-        head = f"Traceback ({len(keep)} of {len(frames)} frames: the draft's):\n"
+        head = f"Traceback ({len(keep)} of {len(frames)} frames: the program's):\n"
         body = "".join(traceback.StackSummary.from_list(keep).format())
         text = head + body + "".join(traceback.format_exception_only(kind, e))
     except BaseException:
@@ -237,5 +343,9 @@ def _describe(e: BaseException, draft_files: set[str]) -> dict[str, Any]:
         text = "…" + text[-MAX_TRACEBACK:]
     return {
         "oom": isinstance(e, MemoryError),
-        "exception": {"type": name[:200], "message": message[:MAX_MESSAGE], "traceback": text},
+        "exception": {
+            "type": wire.clean_text(name[:200]),
+            "message": wire.clean_text(message[:MAX_MESSAGE]),
+            "traceback": wire.clean_text(text),
+        },
     }

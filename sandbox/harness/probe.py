@@ -1,9 +1,13 @@
-"""The isolation probe: an entry point that tests, from inside a job, what a draft can reach.
+"""The isolation probe: a program that tests, from inside the sandbox, what a draft can reach.
 
-`rivet sandbox doctor` runs it as ``entry="sandbox.harness.probe:run"``. Every item is tried
-for real (connect, write, open, syscall), not read from configuration, and reports whether the
-sandbox held. Inputs: ``host_paths`` (paths that exist on the host and must not exist here) and
-``canary`` (a value the host put in its own environment that must not appear here).
+`rivet sandbox doctor` sends this file's source as an ordinary draft (it runs exactly where and
+as a draft would) and calls `run`. Every item is tried for real (connect, write, open,
+syscall), not read from configuration, and reports whether the sandbox held. Inputs:
+``host_paths`` (paths that exist on the host and must not exist here), ``canary`` (a value the
+host put in its own environment that must not appear here) and ``env_keep`` (the variables
+the harness passes on).
+
+Standard library only: it must import wherever a draft does.
 """
 
 from __future__ import annotations
@@ -15,14 +19,12 @@ import socket
 from collections.abc import Callable
 from typing import Any
 
-from .server import ENV_KEEP
-
 _SECRETISH = ("KEY", "TOKEN", "SECRET", "PASSWORD", "CREDENTIAL", "AUTH")
 
 
-def run(ctx: Any) -> dict[str, Any]:
+def run(host_paths: list[str], canary: str, env_keep: list[str]) -> dict[str, Any]:
     """Every probe item as ``{"name", "ok", "detail"}``, in a fixed order."""
-    inputs = dict(ctx.inputs)
+    inputs = {"host_paths": host_paths, "canary": canary, "env_keep": env_keep}
     items = []
     for name, probe in _PROBES:
         try:
@@ -157,7 +159,7 @@ def _cpu(_: dict[str, Any]) -> tuple[bool, str]:
 
 def _env(inputs: dict[str, Any]) -> tuple[bool, str]:
     canary = str(inputs.get("canary", ""))
-    extra = sorted(set(os.environ) - set(ENV_KEEP) - {"HOME", "TMPDIR"})
+    extra = sorted(set(os.environ) - set(inputs.get("env_keep", [])) - {"HOME", "TMPDIR"})
     secretish = sorted(k for k in os.environ if any(s in k.upper() for s in _SECRETISH))
     with open("/proc/self/environ", "rb") as f:
         initial = f.read()
@@ -229,6 +231,84 @@ def _signal_harness(_: dict[str, Any]) -> tuple[bool, str]:
     return alive, f"harness (PID 1) alive after SIGKILL and SIGTERM from the job: {alive}"
 
 
+def _denied(rc: int, err: int) -> bool:
+    return rc < 0 and err in (errno.EPERM, errno.ENOSYS, errno.EACCES)
+
+
+def _io_uring(_: dict[str, Any]) -> tuple[bool, str]:
+    params = ctypes.create_string_buffer(120)  # struct io_uring_params
+    libc = ctypes.CDLL(None, use_errno=True)
+    rc = libc.syscall(425, 4, params)  # io_uring_setup(4, &params), x86_64 and aarch64
+    err = ctypes.get_errno()
+    if rc >= 0:
+        os.close(rc)
+    return _denied(rc, err), f"io_uring_setup -> {rc} ({errno.errorcode.get(err, err)})"
+
+
+def _socket_families(_: dict[str, Any]) -> tuple[bool, str]:
+    out, ok = [], True
+    for name, family, kind in (
+        ("AF_VSOCK", 40, socket.SOCK_STREAM),
+        ("AF_PACKET", 17, socket.SOCK_RAW),
+        ("AF_NETLINK", 16, socket.SOCK_RAW),
+        ("AF_ALG", 38, socket.SOCK_SEQPACKET),
+        ("AF_BLUETOOTH", 31, socket.SOCK_STREAM),
+        ("AF_KEY", 15, socket.SOCK_RAW),
+    ):
+        try:
+            socket.socket(family, kind).close()
+            ok = False
+            out.append(f"{name} opened")
+        except OSError as e:
+            ok = ok and e.errno in (errno.EPERM, errno.EACCES)
+            out.append(f"{name}: {errno.errorcode.get(e.errno, e.errno)}")
+    return ok, "; ".join(out)
+
+
+def _sysv_ipc(_: dict[str, Any]) -> tuple[bool, str]:
+    libc = ctypes.CDLL(None, use_errno=True)
+    out, ok = [], True
+    for name, args in (
+        ("shmget", (0, 1 << 20, 0o1600)),  # IPC_PRIVATE, 1 MiB, IPC_CREAT | 0600
+        ("msgget", (0, 0o1600)),
+        ("semget", (0, 1, 0o1600)),
+    ):
+        rc = getattr(libc, name)(*args)
+        err = ctypes.get_errno()
+        ok = ok and _denied(rc, err)
+        out.append(f"{name} -> {rc} ({errno.errorcode.get(err, err)})")
+    rc = libc.mq_open(b"/rivet-probe", os.O_CREAT | os.O_RDWR, 0o600, None)
+    err = ctypes.get_errno()
+    ok = ok and _denied(rc, err)
+    out.append(f"mq_open -> {rc} ({errno.errorcode.get(err, err)})")
+    return ok, "; ".join(out)
+
+
+def _namespaces(_: dict[str, Any]) -> tuple[bool, str]:
+    libc = ctypes.CDLL(None, use_errno=True)
+    out, ok = [], True
+    for name, flag in (("CLONE_NEWUSER", 0x10000000), ("CLONE_NEWNS", 0x00020000),
+                       ("CLONE_NEWNET", 0x40000000)):  # fmt: skip
+        rc = libc.unshare(flag)
+        err = ctypes.get_errno()
+        ok = ok and _denied(rc, err)
+        out.append(f"unshare({name}) -> {rc} ({errno.errorcode.get(err, err)})")
+    return ok, "; ".join(out)
+
+
+def _ipc_namespace(_: dict[str, Any]) -> tuple[bool, str]:
+    return True, os.readlink("/proc/self/ns/ipc")  # the doctor compares it with the host's
+
+
+def _oom_preference(_: dict[str, Any]) -> tuple[bool, str]:
+    def read(pid: str) -> int:
+        with open(f"/proc/{pid}/oom_score_adj") as f:
+            return int(f.read())
+
+    own, harness = read("self"), read("1")
+    return own > harness, f"this process {own}, the harness (PID 1) {harness}"
+
+
 _PROBES: list[tuple[str, Callable[[dict[str, Any]], tuple[bool, str]]]] = [
     ("network unreachable", _network),
     ("DNS unavailable", _dns),
@@ -249,4 +329,10 @@ _PROBES: list[tuple[str, Callable[[dict[str, Any]], tuple[bool, str]]]] = [
     ("ptrace denied", _ptrace),
     ("mount denied", _mount),
     ("harness survives signals", _signal_harness),
+    ("io_uring denied", _io_uring),
+    ("socket families beyond unix/inet denied (vsock, packet, netlink, alg, …)", _socket_families),
+    ("System V IPC and POSIX message queues denied", _sysv_ipc),
+    ("new namespaces denied", _namespaces),
+    ("IPC namespace", _ipc_namespace),
+    ("the OOM killer prefers the program to the harness", _oom_preference),
 ]

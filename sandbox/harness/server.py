@@ -1,12 +1,20 @@
 """The fork server: PID 1 of the sandbox container (or, for the local backend, a subprocess).
 
-Design rule: heavy modules are imported once here, every job runs in a fresh forked child, and
-this process alone decides the verdict from what it observes (exit status, timing, the cgroup's
-OOM counter, the size and shape of the child's one result frame). It talks to the host over
-its stdin/stdout with length-prefixed frames (`wire`); the child never holds those descriptors,
-and this process is non-dumpable, so the child cannot open them through /proc, ptrace it or read
-its memory. As PID 1 of its PID namespace it ignores every signal sent from inside the
-container, and after each job it kills every other process in the container.
+Design rule: heavy modules are imported once here; every program runs in a fresh forked child
+(a *session*: load once, answer many calls), and this process alone decides each call's verdict
+from what it observes: the time from request to answer (it kills the child when the call's
+budget runs out, whatever the child does with its signals), the exit status, the cgroup's OOM
+counter, the size and shape of the one answer frame per call. It talks to the host over its
+stdin/stdout with length-prefixed frames (`wire`); the child never holds those descriptors, and
+this process is non-dumpable, so the child cannot open them through /proc, ptrace it or read its
+memory. As PID 1 of its PID namespace it ignores every signal sent from inside the container.
+When a session closes it kills every other process in the container, removes every System V
+and POSIX IPC object, and wipes the scratch file systems within a time bound; a wipe that
+cannot finish says so and the host replaces the container.
+
+Requests (host → here): ``open`` (stage dir, limits) → ``opened``; ``call`` (module, function,
+budget; two sections: arguments as JSON + .npz) → ``answer``; ``close`` → ``closed``;
+``warm`` / ``status`` → ``status``.
 
 Usage: python -m sandbox.harness.server [--local] [--tmp DIR] [--preload default|none|a,b]
 """
@@ -20,8 +28,8 @@ import importlib
 import os
 import pkgutil
 import select
-import shutil
 import signal
+import stat
 import sys
 import time
 from typing import Any
@@ -40,16 +48,16 @@ DEFAULT_PRELOAD = (
     "jsonschema",
     "PIL.Image",
     "cv2",
-    "hypothesis",
     "trimesh",
     "open3d",
     "pyrender",
     "contracts",
+    "geometry",
     "toolbox",
 )
 # Packages whose submodules are preloaded too (the project's own, small and pure Python).
-PRELOAD_SUBMODULES = ("contracts", "toolbox")
-# The only environment variables jobs see; everything else is dropped at start.
+PRELOAD_SUBMODULES = ("contracts", "geometry", "toolbox")
+# The only environment variables programs see; everything else is dropped at start.
 ENV_KEEP = (
     "PATH",
     "LANG",
@@ -67,10 +75,13 @@ ENV_KEEP = (
     "MKL_NUM_THREADS",
     "MPLBACKEND",
 )
-MAX_REQUEST = 1 << 20  # [bytes]
+MAX_CONTROL = 1 << 20  # [bytes] an open/close/status request
+MAX_CALL = 320 << 20  # [bytes] a call request (its arguments)
 READ_CHUNK = 1 << 20  # [bytes]
+WIPE_BUDGET_S = 3.0  # [s] the post-session wipe; a longer one reports the container dirty
 _PR_SET_DUMPABLE = 4
 _PR_SET_CHILD_SUBREAPER = 36
+_IPC_RMID = 0
 
 
 class Server:
@@ -86,9 +97,11 @@ class Server:
         self.preloaded: list[str] = []
         self.preload_errors: dict[str, str] = {}
         self.preload_s = 0.0
-        self.reader = wire.FrameReader(MAX_REQUEST)
+        self.reader = wire.FrameReader(MAX_CALL + wire.MAX_HEADER + 4096)
         self.in_pid1 = os.getpid() == 1 and not local
-        self.jobs = 0
+        self.sessions = 0
+        self.session: _Child | None = None
+        self.dirty = ""  # why the container can no longer be trusted clean ("" when it can)
 
     # ---------------------------------------------------------------------------- channel
 
@@ -97,13 +110,11 @@ class Server:
         while data:
             data = data[os.write(self.chan_out, data) :]
 
-    def _request(self, timeout: float | None) -> dict[str, Any] | None:
+    def _request(self) -> tuple[dict[str, Any], list[bytes]] | None:
         """The next request; None when the host closed the channel."""
         while True:
-            for header, _ in self.reader.frames():
-                return header
-            if timeout is not None and not _readable(self.chan_in, timeout):
-                return {"kind": "idle"}
+            for frame in self.reader.frames():
+                return frame
             data = os.read(self.chan_in, READ_CHUNK)
             if not data:
                 return None
@@ -120,34 +131,36 @@ class Server:
             }
         )
         while True:
-            if self.pending and not _readable(self.chan_in, 0):
+            # preload between sessions only: a session's child would not see the modules, and
+            # its calls would wait for them
+            if self.pending and self.session is None and not _readable(self.chan_in, 0):
                 self._preload_next()
                 continue
-            req = self._request(None)
-            if req is None:
+            got = self._request()
+            if got is None:
+                if self.session is not None:
+                    self._close_session()
                 return
+            req, sections = got
             kind = req.get("kind")
-            if kind == "job":
-                try:
-                    self.send(*self.run_job(req))
-                except (OSError, ValueError, KeyError, TypeError) as e:  # a failure of ours
-                    detail = f"harness error: {type(e).__name__}: {e}"[:500]
-                    self.send(
-                        {
-                            "kind": "result",
-                            "id": req.get("id"),
-                            "verdict": "crashed",
-                            "detail": detail,
-                        }
-                    )
-            elif kind == "warm":
-                while self.pending:
-                    self._preload_next()
-                self.send(self.status())
-            elif kind == "status":
-                self.send(self.status())
-            else:
-                self.send({"kind": "error", "error": f"unknown request kind {kind!r}"})
+            try:
+                if kind == "open":
+                    self.send(self.open_session(req))
+                elif kind == "call":
+                    self.send(*self.call(req, sections))
+                elif kind == "close":
+                    self.send(self._close_session(req.get("id")))
+                elif kind == "warm":
+                    while self.pending:
+                        self._preload_next()
+                    self.send(self.status())
+                elif kind == "status":
+                    self.send(self.status())
+                else:
+                    self.send({"kind": "error", "error": f"unknown request kind {kind!r:.40}"})
+            except (OSError, ValueError, KeyError, TypeError) as e:  # a failure of ours
+                detail = f"harness error: {type(e).__name__}: {e}"[:500]
+                self.send({"kind": "error", "id": req.get("id"), "error": detail})
 
     def status(self) -> dict[str, Any]:
         return {
@@ -156,8 +169,9 @@ class Server:
             "pending": self.pending,
             "errors": self.preload_errors,
             "preload_s": round(self.preload_s, 3),
-            "jobs": self.jobs,
+            "sessions": self.sessions,
             "pid1": self.in_pid1,
+            "dirty": self.dirty,
         }
 
     def _preload_next(self) -> None:
@@ -175,156 +189,115 @@ class Server:
             self.preload_errors[name] = f"{type(e).__name__}: {e}"[:500]
         self.preload_s += time.perf_counter() - t0
 
-    # ---------------------------------------------------------------------------- jobs
+    # ---------------------------------------------------------------------------- sessions
 
-    def run_job(self, req: dict[str, Any]) -> tuple[dict[str, Any], list[bytes]]:
-        self.jobs += 1
-        timeout = float(req["timeout_s"])
-        limit = int(req["output_limit"])
-        tail_bytes = int(req.get("tail_bytes", 8192))
-        tmp_dir = self._job_tmp()
-        res_r, res_w = os.pipe()
-        out_r, out_w = os.pipe()
-        err_r, err_w = os.pipe()
-        oom_before = _oom_kills()
-        base_rss = _status_kib("RssAnon")  # what a forked child starts with, roughly
+    def open_session(self, req: dict[str, Any]) -> dict[str, Any]:
+        """Fork a child that loads the program; answer once it is ready (or failed)."""
+        if self.session is not None:
+            return {"kind": "error", "id": req.get("id"), "error": "a session is already open"}
+        self.sessions += 1
+        tmp_dir = self._session_tmp()
+        pipes = {name: os.pipe() for name in ("res", "req", "out", "err")}
+        output_limit = int(req["output_limit"])
         sys.stdout.flush()
         sys.stderr.flush()
+        base_rss = _status_kib("RssAnon")  # what a forked child starts with, roughly
+        oom_before = _oom_kills()
         t0 = time.monotonic()
         pid = os.fork()
         if pid == 0:
             try:
-                child.run(
-                    job_dir=str(req["dir"]),
+                child.serve(
+                    program_dir=str(req["dir"]),
                     tmp_dir=tmp_dir,
-                    result_fd=res_w,
-                    out_fd=out_w,
-                    err_fd=err_w,
+                    result_fd=pipes["res"][1],
+                    request_fd=pipes["req"][0],
+                    out_fd=pipes["out"][1],
+                    err_fd=pipes["err"][1],
                     memory_mb=int(req["memory_mb"]),
-                    output_limit=limit,
+                    output_limit=output_limit,
+                    request_limit=MAX_CALL + wire.MAX_HEADER + 4096,
                 )
             finally:
                 os._exit(70)
-        for fd in (res_w, out_w, err_w):
-            os.close(fd)
-        watch = _Watch(
-            pid, res_r, out_r, err_r, result_cap=limit + wire.MAX_HEADER + 4096, tail=tail_bytes
+        for end in (pipes["res"][1], pipes["req"][0], pipes["out"][1], pipes["err"][1]):
+            os.close(end)
+        self.session = _Child(
+            id=req.get("id"),
+            pid=pid,
+            res_r=pipes["res"][0],
+            req_w=pipes["req"][1],
+            out_r=pipes["out"][0],
+            err_r=pipes["err"][0],
+            result_cap=output_limit + wire.MAX_HEADER + 4096,
+            tail=int(req.get("tail_bytes", 8192)),
+            tmp_dir=tmp_dir,
+            base_rss=base_rss,
+            started=t0,
         )
-        status, rusage, timed_out = watch.wait(t0 + timeout)
-        wall_s = time.monotonic() - t0
-        self._kill_leftovers(pid)
-        watch.drain()
-        watch.close()
-        self._wipe_tmp(tmp_dir)
-        oom_after = _oom_kills()
-        oom = oom_before is not None and oom_after is not None and oom_after > oom_before
-        head: dict[str, Any] = {
-            "kind": "result",
-            "id": req.get("id"),
-            "wall_s": round(wall_s, 6),
-            "peak_memory_mb": round(max(0, rusage.ru_maxrss - base_rss) / 1024, 3)
-            if rusage
+        head, _ = self.session.exchange(None, [], float(req["load_timeout_s"]), oom_before)
+        head.update(kind="opened", id=req.get("id"), load_s=round(time.monotonic() - t0, 6))
+        if head.get("verdict") == "returned":
+            head["verdict"] = "ok"
+        return head
+
+    def call(self, req: dict[str, Any], sections: list[bytes]) -> tuple[dict, list[bytes]]:
+        s = self.session
+        if s is None or s.id != req.get("id"):
+            return {"kind": "error", "id": req.get("id"), "error": "no such open session"}, []
+        if s.dead:
+            return {"kind": "answer", "id": s.id, "verdict": "closed", "detail": s.dead}, []
+        request = wire.pack_frame(
+            {
+                "module": str(req.get("module")),
+                "function": str(req.get("function")),
+                "op": str(req.get("op", "call")),
+            },
+            sections,
+        )
+        head, out = s.exchange(request, sections, float(req["timeout_s"]), _oom_kills())
+        head.update(kind="answer", id=s.id, alive=not s.dead and s.status is None)
+        if head.get("verdict") == "returned":
+            head["verdict"] = "ok"
+        return head, out
+
+    def _close_session(self, sid: Any = None) -> dict[str, Any]:
+        s = self.session
+        if s is None or (sid is not None and s.id != sid):
+            return {"kind": "error", "id": sid, "error": "no such open session"}
+        s.kill()
+        rusage = s.reap()
+        self._kill_leftovers()
+        s.drain()
+        s.close_fds()
+        self.session = None
+        t_wipe = time.monotonic()
+        left = self._cleanup(s.tmp_dir)
+        if left:
+            self.dirty = left
+        return {
+            "kind": "closed",
+            "id": s.id,
+            "wall_s": round(time.monotonic() - s.started, 6),
+            "wipe_s": round(time.monotonic() - t_wipe, 6),
+            "peak_memory_mb": round(max(0, rusage.ru_maxrss - s.base_rss) / 1024, 3)
+            if rusage is not None
             else None,
-            "stdout_tail": watch.out.text(),
-            "stderr_tail": watch.err.text(),
-            "stdout_bytes": watch.out.total,
-            "stderr_bytes": watch.err.total,
-            "exit_code": None,
-            "signal": None,
-            "exception": None,
-            "detail": "",
+            "stdout_tail": s.out.text(),
+            "stderr_tail": s.err.text(),
+            "stdout_bytes": s.out.total,
+            "stderr_bytes": s.err.total,
+            "dirty": self.dirty,
         }
-        if status is not None and os.WIFSIGNALED(status):
-            head["signal"] = os.WTERMSIG(status)
-        elif status is not None:
-            head["exit_code"] = os.WEXITSTATUS(status)
-        sections: list[bytes] = []
-        if watch.over_cap:
-            head.update(
-                verdict="bad_output", detail=f"the result is over the {limit}-byte output cap"
-            )
-        elif timed_out:
-            head.update(verdict="timeout", detail=f"killed after the {timeout:g} s time budget")
-        elif oom:
-            head.update(
-                verdict="oom", detail="the kernel's OOM killer ended the job (memory limit)"
-            )
-        elif head["signal"] is not None:
-            name = _signal_name(head["signal"])
-            head.update(verdict="crashed", detail=f"killed by signal {head['signal']} ({name})")
-        elif head["exit_code"] != 0:
-            head.update(
-                verdict="crashed", detail=f"exited with code {head['exit_code']} without a result"
-            )
-        else:
-            sections = self._judge_result(bytes(watch.result), limit, head)
-        return head, sections
 
-    def _judge_result(self, data: bytes, limit: int, head: dict[str, Any]) -> list[bytes]:
-        """Set the verdict from the child's result frame; the sections to pass on when ok."""
-        if not data:
-            head.update(verdict="crashed", detail="exited without a result")
-            return []
-        reader = wire.FrameReader(limit + wire.MAX_HEADER + 4096)
-        try:
-            reader.feed(data)
-            frames = list(reader.frames())
-        except wire.FrameError as e:
-            head.update(verdict="bad_output", detail=f"malformed result channel: {e}")
-            return []
-        if len(frames) != 1 or reader.pending:
-            head.update(
-                verdict="bad_output",
-                detail=f"the result channel carried {len(frames)} frames and {reader.pending} "
-                "stray bytes; exactly one frame is accepted (forged result?)",
-            )
-            return []
-        frame, sections = frames[0]
-        status = frame.get("status")
-        if status == "returned" and len(sections) == 2:
-            head.update(verdict="ok")
-            return sections
-        if status == "raised" and _valid_exception(frame.get("exception")):
-            exc = frame["exception"]
-            head["exception"] = {
-                k: exc[k][: 2 * child.MAX_TRACEBACK] for k in ("type", "message", "traceback")
-            }
-            if frame.get("oom") is True:
-                head.update(verdict="oom", detail="MemoryError: the job hit its memory limit")
-            else:
-                head.update(verdict="exception", detail=f"{exc['type']}: {exc['message']}"[:500])
-            return []
-        if status == "unencodable" and isinstance(frame.get("problem"), str):
-            head.update(
-                verdict="bad_output", detail=f"unencodable output: {frame['problem'][:1000]}"
-            )
-            return []
-        head.update(
-            verdict="bad_output", detail=f"result frame with status {str(status)[:50]!r} is invalid"
-        )
-        return []
-
-    def _job_tmp(self) -> str:
-        path = os.path.join(self.tmp_root, f"job{self.jobs}-{os.urandom(4).hex()}")
+    def _session_tmp(self) -> str:
+        path = os.path.join(self.tmp_root, f"s{self.sessions}-{os.urandom(4).hex()}")
         os.mkdir(path, 0o700)  # a fresh, unguessable name: nothing can be planted there
         return path
 
-    def _wipe_tmp(self, tmp_dir: str) -> None:
-        """Remove what the job left in the scratch file systems, never following links."""
-        roots = [self.tmp_root, "/dev/shm"] if self.in_pid1 else [tmp_dir]
-        for root in roots:
-            if root == tmp_dir:
-                _remove(root)
-                continue
-            try:
-                entries = list(os.scandir(root))
-            except OSError:
-                continue
-            for entry in entries:
-                _remove(entry.path)
-
-    def _kill_leftovers(self, pid: int) -> None:
-        """Kill whatever the job started (threads died with it; processes may have escaped)."""
+    def _kill_leftovers(self) -> None:
+        """Kill whatever the program started (threads died with it; processes may have
+        escaped into their own sessions)."""
         for _ in range(1000):
             alive = False
             if self.in_pid1:
@@ -346,6 +319,22 @@ class Server:
                 return
             time.sleep(0.001)
 
+    def _cleanup(self, tmp_dir: str) -> str:
+        """Remove what the session left: IPC objects, scratch files. '' when all is gone,
+        else what is left (the container is then dirty)."""
+        deadline = time.monotonic() + WIPE_BUDGET_S
+        problems = []
+        if self.in_pid1:
+            problems += _remove_ipc()
+            roots = [self.tmp_root, "/dev/shm"]
+        else:
+            roots = [tmp_dir]
+        for root in roots:
+            left = wipe(root, deadline, keep_root=root != tmp_dir)
+            if left:
+                problems.append(f"{root}: {left}")
+        return "; ".join(problems)
+
 
 class _Tail:
     """The last `size` bytes of a stream and its total length."""
@@ -359,49 +348,181 @@ class _Tail:
         del self.buf[: max(0, len(self.buf) - self.size)]
 
     def text(self) -> str:
-        return self.buf.decode("utf-8", errors="replace")
+        return wire.clean_text(self.buf.decode("utf-8", errors="replace"))
 
 
-class _Watch:
-    """Waits for one child while reading its three pipes, with a deadline."""
+class _Child:
+    """One session's process: its pipes, what it printed, and how it answers."""
 
     def __init__(
-        self, pid: int, res_r: int, out_r: int, err_r: int, *, result_cap: int, tail: int
+        self,
+        *,
+        id: Any,
+        pid: int,
+        res_r: int,
+        req_w: int,
+        out_r: int,
+        err_r: int,
+        result_cap: int,
+        tail: int,
+        tmp_dir: str,
+        base_rss: int,
+        started: float,
     ) -> None:
-        self.pid = pid
-        self.result = bytearray()
+        self.id, self.pid = id, pid
+        self.req_w = req_w
         self.result_cap = result_cap
-        self.over_cap = False
-        self.out = _Tail(tail)
-        self.err = _Tail(tail)
+        self.tmp_dir, self.base_rss, self.started = tmp_dir, base_rss, started
+        self.out, self.err = _Tail(tail), _Tail(tail)
+        self.results = wire.FrameReader(result_cap)
+        self.malformed = False
         self.fds = {res_r: "result", out_r: "out", err_r: "err"}
         self.poll = select.poll()
         for fd in self.fds:
             os.set_blocking(fd, False)
             self.poll.register(fd, select.POLLIN)
-        try:
-            self.pidfd: int | None = os.pidfd_open(pid)
-            self.poll.register(self.pidfd, select.POLLIN)
-        except (AttributeError, OSError):
-            self.pidfd = None
+        os.set_blocking(req_w, False)
+        self.status: int | None = None
+        self.rusage: Any = None
+        self.dead = ""  # why the session can answer no more calls
 
-    def wait(self, deadline: float) -> tuple[int | None, Any, bool]:
-        """(wait status, rusage, timed out) once the child exited or was killed."""
-        timed_out = False
+    def exchange(
+        self, request: bytes | None, sections: list[bytes], timeout: float, oom_before: Any
+    ) -> tuple[dict[str, Any], list[bytes]]:
+        """Send a request (None: wait for the ready frame) and wait for its one answer frame.
+
+        Returns (header with ``verdict`` and ``seconds``, sections when it returned).
+        """
+        stray = request is not None and (
+            self.results.pending or self.malformed or self._readable_result()
+        )
+        if stray:  # bytes before the request: the program wrote them on its own
+            self._die("the program wrote to its result channel out of turn")
+            return self._verdict("bad_output", self.dead), []
+        t0 = time.monotonic()
+        deadline = t0 + max(timeout, 0.0)
+        pending = memoryview(request) if request is not None else memoryview(b"")
+        frame, over_cap = None, False
         while True:
-            pid, status, rusage = os.wait4(self.pid, os.WNOHANG)
-            if pid:
-                return status, rusage, timed_out
+            if self.status is None:
+                pid, status, rusage = os.wait4(self.pid, os.WNOHANG)
+                if pid:
+                    self.status, self.rusage = status, rusage
+            frame, over_cap = self._frame()
+            if frame is not None or over_cap or self.status is not None:
+                break
             now = time.monotonic()
-            if now >= deadline or self.over_cap:
-                timed_out = not self.over_cap
-                os.kill(self.pid, signal.SIGKILL)
-                _, status, rusage = os.wait4(self.pid, 0)
-                return status, rusage, timed_out
-            wait_s = deadline - now if self.pidfd is not None else min(deadline - now, 0.002)
-            for fd, _ in self.poll.poll(int(wait_s * 1000) + 1):
+            if now >= deadline:
+                self.kill()
+                self.reap()
+                seconds = time.monotonic() - t0
+                self._die(f"killed after the {timeout:.3g} s budget of a call")
+                head = self._verdict("timeout", f"killed after the {timeout:.3g} s time budget")
+                head["seconds"] = round(seconds, 6)
+                return head, []
+            if pending:
+                try:
+                    n = os.write(self.req_w, pending[: 1 << 16])
+                    pending = pending[n:]
+                except BlockingIOError:
+                    pass
+                except BrokenPipeError:
+                    pending = memoryview(b"")
+            wait = min(deadline - now, 0.002 if pending else 0.05)
+            for fd, _ in self.poll.poll(int(wait * 1000) + 1):
                 if fd in self.fds:
                     self._read(fd)
+        seconds = time.monotonic() - t0
+        oom_after = _oom_kills()
+        oom = oom_before is not None and oom_after is not None and oom_after > oom_before
+        head: dict[str, Any]
+        out: list[bytes] = []
+        if over_cap:
+            self.kill()
+            self._die("the answer was over the output cap or not a frame")
+            head = self._verdict(
+                "bad_output",
+                "the answer is over the output cap, or its channel does not carry frames "
+                "(forged result?)",
+            )
+        elif frame is not None:
+            head, out = self._judge(*frame)
+            if self.results.pending:  # more bytes after the one frame: forged or stray
+                self._die("the program wrote more than one answer")
+                head, out = self._verdict("bad_output", self.dead), []
+        elif oom:
+            self._die("the kernel's OOM killer ended the program")
+            head = self._verdict("oom", "the kernel's OOM killer ended the job (memory limit)")
+        else:
+            head = self._death()
+        head["seconds"] = round(seconds, 6)
+        return head, out
+
+    def _readable_result(self) -> bool:
+        for fd, kind in list(self.fds.items()):
+            if kind == "result" and _readable(fd, 0):
+                self._read(fd)
+        return bool(self.results.pending) or self.malformed
+
+    def _frame(self) -> tuple[tuple[dict, list[bytes]] | None, bool]:
+        """The first complete frame of the result stream (taken from it), or None; True when
+        the stream is over its cap or not frames at all."""
+        if self.malformed:
+            return None, True
+        try:
+            for frame in self.results.frames():
+                return frame, False
+        except wire.FrameError:
+            self.malformed = True
+            return None, True
+        return None, False
+
+    def _judge(self, frame: dict[str, Any], sections: list[bytes]) -> tuple[dict, list[bytes]]:
+        status = frame.get("status")
+        if status in ("returned", "ready") and len(sections) == (2 if status == "returned" else 0):
+            return {"verdict": "returned"}, list(sections)
+        if status == "raised" and _valid_exception(frame.get("exception")):
+            exc = frame["exception"]
+            head = {
+                "exception": {
+                    k: wire.clean_text(exc[k][: 2 * child.MAX_TRACEBACK])
+                    for k in ("type", "message", "traceback")
+                }
+            }
+            if frame.get("oom") is True:
+                head.update(verdict="oom", detail="MemoryError: the job hit its memory limit")
+            else:
+                detail = f"{exc['type']}: {exc['message']}"[:500]
+                head.update(verdict="exception", detail=wire.clean_text(detail))
+            return head, []
+        if status == "unencodable" and isinstance(frame.get("problem"), str):
+            problem = wire.clean_text(frame["problem"][:1000])
+            return {"verdict": "bad_output", "detail": f"unencodable output: {problem}"}, []
+        return self._verdict(
+            "bad_output", f"answer frame with status {str(status)[:50]!r} is invalid"
+        ), []
+
+    def _death(self) -> dict[str, Any]:
+        status = self.status
+        if status is not None and os.WIFSIGNALED(status):
+            sig = os.WTERMSIG(status)
+            self._die(f"the program's process was killed by signal {sig}")
+            return {
+                **self._verdict("crashed", f"killed by signal {sig} ({_signal_name(sig)})"),
+                "signal": sig,
+            }
+        code = os.WEXITSTATUS(status) if status is not None else None
+        self._die(f"the program's process exited (code {code})")
+        return {
+            **self._verdict("crashed", f"exited with code {code} without a result"),
+            "exit_code": code,
+        }
+
+    def _verdict(self, verdict: str, detail: str) -> dict[str, Any]:
+        return {"verdict": verdict, "detail": detail}
+
+    def _die(self, why: str) -> None:
+        self.dead = self.dead or why
 
     def _read(self, fd: int) -> bool:
         try:
@@ -415,24 +536,126 @@ class _Watch:
             return False
         kind = self.fds[fd]
         if kind == "result":
-            if len(self.result) + len(data) > self.result_cap:
-                self.over_cap = True
-            else:
-                self.result += data
+            if not self.malformed:
+                try:
+                    self.results.feed(data)
+                except wire.FrameError:
+                    self.malformed = True
         else:
             (self.out if kind == "out" else self.err).add(data)
         return True
 
+    def kill(self) -> None:
+        if self.status is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGKILL)
+
+    def reap(self) -> Any:
+        if self.status is None:
+            with contextlib.suppress(ChildProcessError):
+                _, self.status, self.rusage = os.wait4(self.pid, 0)
+        return self.rusage
+
     def drain(self) -> None:
         for fd in list(self.fds):
-            while fd in self.fds and self._read(fd) and not self.over_cap:
-                pass
+            for _ in range(64):  # bounded: a leftover writer was killed, the pipe ends
+                if fd not in self.fds or not self._read(fd):
+                    break
 
-    def close(self) -> None:
-        for fd in [*self.fds, *([self.pidfd] if self.pidfd is not None else [])]:
+    def close_fds(self) -> None:
+        for fd in [*self.fds, self.req_w]:
             with contextlib.suppress(OSError):
                 os.close(fd)
         self.fds.clear()
+
+
+# -------------------------------------------------------------------------------- cleanup
+
+
+def wipe(root: str, deadline: float, *, keep_root: bool = True) -> str:
+    """Remove everything under `root` (and `root` itself unless `keep_root`), never following a
+    link, whatever the modes (a directory chmod-ed to 000 is opened again) and however deep
+    (no recursion, two descriptors at a time). Returns '' when done, else what stopped it."""
+    flags = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW
+    try:
+        top = os.open(root, flags)
+    except FileNotFoundError:
+        return ""
+    except OSError as e:
+        return f"cannot open: {e.strerror}"
+    names: list[str] = []  # the path from `top` to `cur`
+    cur = top
+    try:
+        while True:
+            if time.monotonic() > deadline:
+                return f"not wiped within {WIPE_BUDGET_S:g} s ({len(names)} levels deep)"
+            entry = None
+            with os.scandir(cur) as it:
+                for entry in it:
+                    break
+            if entry is None:  # empty: go up and remove it
+                if not names:
+                    break
+                parent = os.open("..", flags, dir_fd=cur)
+                os.close(cur)
+                cur = parent
+                os.rmdir(names.pop(), dir_fd=cur)
+                continue
+            name = entry.name
+            try:
+                is_dir = entry.is_dir(follow_symlinks=False)
+            except OSError:
+                is_dir = False
+            if not is_dir:
+                os.unlink(name, dir_fd=cur)
+                continue
+            with contextlib.suppress(OSError):
+                os.chmod(name, stat.S_IRWXU, dir_fd=cur)
+            sub = os.open(name, flags, dir_fd=cur)
+            os.close(cur)
+            cur = sub
+            names.append(name)
+    except OSError as e:
+        return f"cannot remove ({e.strerror})"
+    finally:
+        os.close(cur)
+    if not keep_root:
+        try:
+            os.rmdir(root)
+        except OSError as e:
+            return f"cannot remove the root ({e.strerror})"
+    return ""
+
+
+def _remove_ipc() -> list[str]:
+    """Remove every System V IPC object and POSIX message queue of the container's IPC
+    namespace (the seccomp profile denies creating them; this holds where it is not in force)."""
+    problems = []
+    libc = ctypes.CDLL(None, use_errno=True)
+    for kind, ctl in (("shm", "shmctl"), ("msg", "msgctl"), ("sem", "semctl")):
+        try:
+            with open(f"/proc/sysvipc/{kind}") as f:
+                rows = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            fields = row.split()
+            if len(fields) < 2 or not fields[1].isdigit():
+                continue
+            ident = int(fields[1])
+            args = (ident, 0, _IPC_RMID, None) if kind == "sem" else (ident, _IPC_RMID, None)
+            if getattr(libc, ctl)(*args) != 0:
+                problems.append(f"{kind} {ident}: {os.strerror(ctypes.get_errno())}")
+    try:
+        queues = os.listdir("/dev/mqueue")
+    except OSError:
+        queues = []
+    for name in queues:
+        try:
+            os.unlink(os.path.join("/dev/mqueue", name))
+        except OSError as e:
+            problems.append(f"mqueue {name}: {e.strerror}")
+    return problems
 
 
 def _readable(fd: int, timeout: float) -> bool:
@@ -465,23 +688,6 @@ def _children(ppid: int) -> list[int]:
         if int(fields[1]) == ppid:
             out.append(int(name))
     return out
-
-
-def _remove(path: str) -> None:
-    """Remove a file or a tree without following links, even dirs a job chmod-ed to 000."""
-    try:
-        if os.path.isdir(path) and not os.path.islink(path):
-            os.chmod(path, 0o700)
-            for dirpath, dirnames, _ in os.walk(path):  # top-down: fix modes before descending
-                for d in dirnames:
-                    full = os.path.join(dirpath, d)
-                    if not os.path.islink(full):
-                        os.chmod(full, 0o700)
-            shutil.rmtree(path, ignore_errors=True)
-        else:
-            os.unlink(path)
-    except OSError:
-        pass
 
 
 def _valid_exception(exc: Any) -> bool:
@@ -527,7 +733,7 @@ def _prctl(option: int, value: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sandbox.harness.server")
     parser.add_argument("--local", action="store_true", help="run as a host subprocess")
-    parser.add_argument("--tmp", default="/tmp", help="scratch root for jobs")
+    parser.add_argument("--tmp", default="/tmp", help="scratch root for sessions")
     parser.add_argument("--preload", default="default", help="default, none, or a,b,c")
     args = parser.parse_args(argv)
     # The channel moves off fds 0/1 so that stray prints (ours, libraries') go to stderr.
@@ -545,6 +751,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.clear()
     os.environ.update(keep, HOME=args.tmp, TMPDIR=args.tmp)
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGPIPE, signal.SIG_IGN)
     if args.preload == "default":
         preload = list(DEFAULT_PRELOAD)
     elif args.preload == "none":

@@ -28,9 +28,25 @@ _SECTION = struct.Struct(">Q")
 MAX_HEADER = 1 << 20  # [bytes]
 MAX_SECTIONS = 8
 ARRAY_KEY = "__ndarray__"
+CONST_KEY = "__const__"  # in call arguments only: a constant the program was loaded with
 ARRAY_KINDS = frozenset("biufc")  # bool, int, uint, float, complex: nothing that can hold objects
 MAX_DEPTH = 64
+MAX_ELEMENTS = 1_000_000  # JSON values (numbers, strings, lists, dicts) in one decoded value
+MAX_ARRAY_ELEMENTS = 1 << 28  # elements of one array, zero-length dimensions counted as 1
+MAX_NDIM = 8
 _ARRAY_NAME = re.compile(r"a[0-9]{1,7}")
+_SURROGATE = re.compile("[\ud800-\udfff]")
+# C0/C1 controls and DEL, but tab and newline: an escape sequence starts with ESC or CSI.
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def clean_text(text: str) -> str:
+    """`text` safe for a terminal, a journal, HTML-escaping or a model: lone surrogates become
+    U+FFFD and control characters (escape sequences included) become visible ``\\xNN``."""
+    if not isinstance(text, str):
+        text = str(text)
+    text = _SURROGATE.sub("\ufffd", text)
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
 class FrameError(Exception):
@@ -203,13 +219,23 @@ def encode_value(value: Any, *, max_bytes: int) -> tuple[bytes, bytes]:
 
 
 def decode_value(text: bytes, blob: bytes, *, max_bytes: int) -> Any:
-    """Decode and validate what `encode_value` produced; raises `BadValue`."""
+    """Decode and validate what `encode_value` produced; raises `BadValue`.
+
+    Bounded before anything large is built: the bytes, the number of JSON values (counted on
+    the raw text), the nesting depth, every array's shape against its bytes. Strings come out
+    with lone surrogates replaced (they cannot be printed or encoded).
+    """
     if len(text) + len(blob) > max_bytes:
         raise BadValue("$", f"value of {len(text) + len(blob)} bytes is over the cap")
+    # Every JSON value but the first is preceded by '[', '{', ',' or ':' (a key's value);
+    # keys are counted too, so this bounds what json.loads would build.
+    tokens = text.count(b"[") + text.count(b"{") + text.count(b",") + text.count(b":")
+    if tokens > 2 * MAX_ELEMENTS:
+        raise BadValue("$", f"value holds more than {MAX_ELEMENTS} JSON elements")
     try:
         tree = json.loads(text)
     except (ValueError, RecursionError) as e:
-        raise BadValue("$", f"not valid JSON ({e})") from None
+        raise BadValue("$", f"not valid JSON ({str(e)[:200]})") from None
     arrays = _load_npz(blob, max_bytes=max_bytes) if blob else {}
     used: set[str] = set()
 
@@ -223,43 +249,92 @@ def decode_value(text: bytes, blob: bytes, *, max_bytes: int) -> Any:
                     raise BadValue(path, "dangling or malformed array reference")
                 used.add(name)
                 return arrays[name]
-            return {k: walk(item, f"{path}.{k}", depth + 1) for k, item in v.items()}
+            return {
+                _clean_key(k): walk(item, f"{path}.{_clean_key(k)[:40]}", depth + 1)
+                for k, item in v.items()
+            }
         if isinstance(v, list):
             return [walk(item, f"{path}[{i}]", depth + 1) for i, item in enumerate(v)]
+        if isinstance(v, str) and _SURROGATE.search(v):
+            return _SURROGATE.sub("\ufffd", v)
         return v
 
     value = walk(tree, "$", 0)
     if set(arrays) - used:
-        raise BadValue("$", f"arrays {sorted(set(arrays) - used)} are not referenced")
+        raise BadValue("$", f"arrays {sorted(set(arrays) - used)[:5]} are not referenced")
     return value
 
 
+def _clean_key(k: str) -> str:
+    return _SURROGATE.sub("\ufffd", k) if _SURROGATE.search(k) else k
+
+
 def _load_npz(blob: bytes, *, max_bytes: int) -> dict[str, np.ndarray]:
-    """Arrays from an uncompressed .npz, never unpickling, sizes checked before reading."""
+    """Arrays from an uncompressed .npz, never unpickling, every header checked against the
+    member's size before any data is read."""
     try:
         zf = zipfile.ZipFile(io.BytesIO(blob))
     except (zipfile.BadZipFile, ValueError, OSError) as e:
         raise BadValue("$", f"array section is not a .npz archive ({e})") from None
     infos = zf.infolist()
+    if len(infos) > MAX_ELEMENTS:
+        raise BadValue("$", "too many arrays")
     if sum(i.file_size for i in infos) > max_bytes:
         raise BadValue("$", "arrays are over the output cap once unpacked")
     out: dict[str, np.ndarray] = {}
     for info in infos:
         name = info.filename.removesuffix(".npy")
         if not info.filename.endswith(".npy") or not _ARRAY_NAME.fullmatch(name):
-            raise BadValue("$", f"unexpected member {info.filename!r} in the array section")
+            raise BadValue("$", f"unexpected member {info.filename[:60]!r} in the array section")
+        if name in out:
+            raise BadValue(f"arrays[{name}]", "the archive holds this array twice")
         if info.compress_type != zipfile.ZIP_STORED:
             raise BadValue(f"arrays[{name}]", "compressed .npz members are not accepted")
         try:
             with zf.open(info) as f:
-                arr = np.lib.format.read_array(f, allow_pickle=False)
+                shape, dtype = _npy_header(f, info.file_size, name)
+                arr = _read_data(f, shape, dtype, name)
+        except BadValue:
+            raise
         except (ValueError, OSError, EOFError, zipfile.BadZipFile, RuntimeError) as e:
-            raise BadValue(f"arrays[{name}]", f"unreadable array ({e})") from None
-        if not isinstance(arr, np.ndarray) or arr.dtype.kind not in ARRAY_KINDS:
-            raise BadValue(
-                f"arrays[{name}]", f"array dtype {getattr(arr, 'dtype', '?')} is not allowed"
-            )
-        if arr.dtype.fields is not None:
-            raise BadValue(f"arrays[{name}]", "structured arrays are not allowed")
+            raise BadValue(f"arrays[{name}]", f"unreadable array ({str(e)[:200]})") from None
         out[name] = arr
     return out
+
+
+def _npy_header(f: Any, member_size: int, name: str) -> tuple[tuple[int, ...], np.dtype]:
+    """(shape, dtype) of a .npy member, refused unless its data fills the member exactly."""
+    version = np.lib.format.read_magic(f)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(f, max_header_size=10_000)
+    elif version in ((2, 0), (3, 0)):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(f, max_header_size=10_000)
+    else:
+        raise BadValue(f"arrays[{name}]", f"unknown .npy version {version}")
+    if fortran:
+        raise BadValue(f"arrays[{name}]", "Fortran-ordered arrays are not accepted")
+    if dtype.kind not in ARRAY_KINDS or dtype.fields is not None or dtype.hasobject:
+        raise BadValue(f"arrays[{name}]", f"array dtype {dtype} is not allowed (bool/int/float)")
+    if len(shape) > MAX_NDIM or any(not isinstance(d, int) or d < 0 for d in shape):
+        raise BadValue(f"arrays[{name}]", f"array shape {shape} is not allowed")
+    count = 1
+    for d in shape:
+        count *= max(d, 1)  # an (N, 0) array holds nothing but still costs N when listed
+        if count > MAX_ARRAY_ELEMENTS:
+            raise BadValue(f"arrays[{name}]", f"array shape {shape} is too large")
+    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if f.tell() + nbytes != member_size:
+        raise BadValue(
+            f"arrays[{name}]",
+            f"array header announces {shape} {dtype} ({nbytes} bytes) but the member holds "
+            f"{member_size - f.tell()}",
+        )
+    return tuple(shape), dtype
+
+
+def _read_data(f: Any, shape: tuple[int, ...], dtype: np.dtype, name: str) -> np.ndarray:
+    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    data = f.read(nbytes)
+    if len(data) != nbytes:
+        raise BadValue(f"arrays[{name}]", "array data is truncated")
+    return np.frombuffer(data, dtype=dtype).reshape(shape).copy()

@@ -1,4 +1,4 @@
-"""The Docker backend against the real engine: results, entry points, hardening, recovery."""
+"""The Docker backend against the real engine: sessions, results, hardening, recovery."""
 
 from __future__ import annotations
 
@@ -37,24 +37,55 @@ def test_ok_with_arrays_and_extra_modules(docker_executor):
     assert report.backend == "docker" and report.peak_memory_mb is not None
 
 
-def test_entry_point_in_the_image(docker_executor):
-    report = docker_executor.run(
-        Job(
-            source="def f(x):\n    return 1 / x\n",
-            function="f",
-            entry="sandbox.harness.entries:call_many",
-            inputs={"calls": [{"x": 2}, {"x": 0}]},
-        )
+def test_a_session_loads_once_and_answers_many_calls(docker_executor):
+    import trimesh
+
+    from sandbox import MESHES, Program
+
+    source = (
+        "CALLS = []\n"
+        "def f(meshes, x):\n"
+        "    CALLS.append(x)\n"
+        "    meshes['box'].vertices *= 2  # must not reach the next call\n"
+        "    return {'n': len(CALLS), 'top': float(meshes['box'].vertices.max()), 'inv': 1 / x}\n"
     )
-    assert report.verdict == "ok", report
-    assert (
-        report.output[0]["ok"] == 0.5 and report.output[1]["error"]["type"] == "ZeroDivisionError"
-    )
+    program = Program(modules={"prog": source}, meshes={"box": trimesh.creation.box((1, 1, 1))})
+    with docker_executor.open_session(program) as session:
+        assert session.load.ok, session.load
+        answers = [session.call("prog", "f", MESHES, x, timeout_s=10) for x in (2, 4, 0, 8)]
+    assert [a.verdict for a in answers] == ["ok", "ok", "exception", "ok"]
+    assert [a.value["n"] for a in answers if a.ok] == [1, 2, 4]
+    assert all(a.value["top"] == 0.5 for a in answers if a.ok)
+    assert answers[2].exception.type == "ZeroDivisionError"
+    assert all(0 < a.seconds < 5 for a in answers)
 
 
-def test_missing_entry_point_is_an_exception(docker_executor):
-    report = docker_executor.run(Job(source="", function="f", entry="contracts.nothing_here:run"))
-    assert report.verdict == "exception" and report.exception.type == "ModuleNotFoundError"
+def test_a_call_that_ignores_its_alarm_is_killed_from_outside(docker_executor):
+    from sandbox import Program
+
+    source = (
+        "import signal, time\n"
+        "def f():\n"
+        "    signal.signal(signal.SIGALRM, signal.SIG_IGN)\n"
+        "    signal.setitimer(signal.ITIMER_REAL, 0)\n"
+        "    while True:\n"
+        "        time.sleep(0.01)\n"
+        "def g():\n"
+        "    return 1\n"
+    )
+    with docker_executor.open_session(Program(modules={"prog": source})) as session:
+        first = session.call("prog", "f", timeout_s=1)
+        later = session.call("prog", "g", timeout_s=1)
+    assert first.verdict == "timeout" and 1.0 <= first.seconds < 3.0, first
+    assert later.verdict == "closed", later
+
+
+def test_a_program_that_does_not_import_reports_why(docker_executor):
+    from sandbox import Program
+
+    with docker_executor.open_session(Program(modules={"prog": "import nothing_here"})) as s:
+        assert s.load.verdict == "exception" and s.load.exception.type == "ModuleNotFoundError"
+        assert s.call("prog", "f", timeout_s=1).verdict == "closed"
 
 
 def test_heavy_modules_are_preloaded_and_rendering_works(docker_executor):

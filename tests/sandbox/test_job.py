@@ -26,8 +26,6 @@ def test_public_names_resolve():
         ({"modules": {"contracts": "x = 1"}}, "would shadow"),
         ({"modules": {"draft": "x = 1"}}, "both the draft"),
         ({"modules": {"helper": 3}}, "source strings"),
-        ({"entry": "os.system"}, "neither 'call'"),
-        ({"entry": "x:y; rm -rf /"}, "neither 'call'"),
         ({"inputs": {1: 2}}, "argument names"),
         ({"timeout_s": 0}, "timeout_s"),
         ({"memory_mb": 1}, "memory_mb"),
@@ -49,7 +47,6 @@ def test_bad_job_is_a_usage_error():
 def test_job_sources_put_the_draft_first():
     job = Job(source="a = 1", function="f", modules={"helper": "b = 2"}, module_name="render")
     assert list(job.sources) == ["render", "helper"]
-    assert job.entry == "call"
 
 
 def test_report_to_dict_is_json():

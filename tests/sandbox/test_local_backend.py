@@ -83,19 +83,14 @@ def test_output_schema_is_checked_on_the_host(local_executor):
     assert run(local_executor, "def f():\n    return {'n': 3}\n", output_schema=schema).ok
 
 
-def test_entry_point_receives_the_loaded_modules(local_executor):
+def test_a_session_answers_calls_in_order_with_their_errors(local_executor):
+    from sandbox import Program
+
     source = "def f(x):\n    if x < 0:\n        raise ValueError('negative')\n    return x * x\n"
-    report = local_executor.run(
-        Job(
-            source=source,
-            function="f",
-            entry="sandbox.harness.entries:call_many",
-            inputs={"calls": [{"x": 2}, {"x": -1}, {"x": 3}]},
-        )
-    )
-    assert report.verdict == "ok", report
-    assert [r.get("ok") for r in report.output] == [4, None, 9]
-    assert report.output[1]["error"] == {"type": "ValueError", "message": "negative"}
+    with local_executor.open_session(Program(modules={"prog": source})) as session:
+        answers = [session.call("prog", "f", x, timeout_s=5) for x in (2, -1, 3)]
+    assert [a.value for a in answers] == [4, None, 9]
+    assert answers[1].verdict == "exception" and answers[1].exception.message == "negative"
 
 
 def test_unsendable_inputs_are_the_callers_mistake(local_executor):
