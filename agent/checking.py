@@ -1,7 +1,8 @@
 """The checker the authoring loop uses: the full check suites, run in the sandbox.
 
-A thin adapter over `contracts.checks` (which runs each suite inside the sandbox executor);
-it exists so the loop depends on the small `Checker` protocol only.
+A thin adapter over `checks.run_checks` (the judge, in this process; each draft in a sandbox
+session of the chosen backend); it exists so the loop depends on the small `Checker`
+protocol only.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from pathlib import Path
 
 
 class SuiteChecker:
-    """Runs `contracts.checks.run_checks` with the chosen sandbox backend."""
+    """Runs `checks.run_checks` with the chosen sandbox backend."""
 
     def __init__(self, *, sandbox: str = "docker", thorough: bool = False) -> None:
         self.sandbox = sandbox
@@ -27,7 +28,7 @@ class SuiteChecker:
     def check(
         self, domain: str, function: str, source: str, *, deps: dict[str, str], out_dir: Path
     ) -> dict:
-        from contracts.checks import run_checks
+        from checks import run_checks
 
         return run_checks(
             domain,
@@ -45,6 +46,6 @@ class SuiteChecker:
             self._executor = None
 
     def markdown(self, report: dict) -> str:
-        from contracts.checks import report_markdown
+        from checks import report_markdown
 
         return report_markdown(report)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from agent import dag
+from contracts.functions import FUNCTIONS
 from agent.clients.base import Author, ModelRequest
 from agent.clients.replay import RecordingClient
 from agent.clients.scripted import ScriptedClient
@@ -28,7 +28,7 @@ PREAMBLE = (
 def program_sequence(folder: Path) -> dict[str, list[tuple[str, str]]]:
     """Per function: [(label, source)] — drafts in version order, then the final version."""
     out: dict[str, list[tuple[str, str]]] = {}
-    for function in dag.FUNCTIONS:
+    for function in FUNCTIONS:
         final = folder / f"{function}.py"
         if not final.is_file():
             raise UsageError(f"{folder}: {final.name} is missing")

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
-from agent import dag
+from contracts.functions import CODE_DEPS, authoring_order
 from agent.clients.base import ImageBlock, ModelClient
 from agent.errors import AuthoringExhausted
 from agent.extract import DraftFormatError, extract_draft, format_error_report
@@ -81,7 +81,7 @@ class AuthoringRun:
             self.journal.event(
                 "started", config={"domain": self.ctx.domain, "max_attempts": self.max_attempts}
             )
-        for function in dag.authoring_order():
+        for function in authoring_order():
             if function in frozen:
                 self.progress(f"[{function}] frozen earlier in this run")
                 continue
@@ -131,7 +131,7 @@ class AuthoringRun:
                 saved = self.journal.saved_report(function, attempt)
                 if saved is None:
                     self._say(function, attempt, "checking the draft")
-                    deps = {d: frozen[d] for d in dag.CODE_DEPS[function]}
+                    deps = {d: frozen[d] for d in CODE_DEPS[function]}
                     report = self.checker.check(
                         self.ctx.domain,
                         function,

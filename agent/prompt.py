@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from string import Template
 
-from agent import dag
+from contracts.functions import CODE_DEPS, CONTRACT_DEPS, SIGNATURES
 from agent.clients.base import Block, ImageBlock, ModelRequest, TextBlock
 
 
@@ -85,14 +85,14 @@ def build_request(
             content.append(TextBlock(text="(end of reference images)", cache=True))
 
     task = [template(f"{function}.md").strip()]
-    task.append(f"Signature: `{dag.SIGNATURES[function]}`")
-    for dep in dag.CODE_DEPS[function]:
+    task.append(f"Signature: `{SIGNATURES[function]}`")
+    for dep in CODE_DEPS[function]:
         task.append(
             f"## Frozen `{dep}` (already checked; importable as `from {dep} import {dep}`)"
             f"\n\n```python\n{frozen[dep].rstrip()}\n```"
         )
-    for dep in dag.CONTRACT_DEPS[function]:
-        task.append(f"## Contract of `{dep}`\n\n`{dag.SIGNATURES[dep]}`: see the representation.")
+    for dep in CONTRACT_DEPS[function]:
+        task.append(f"## Contract of `{dep}`\n\n`{SIGNATURES[dep]}`: see the representation.")
     content.append(TextBlock(text="\n\n".join(task)))
 
     if feedback is not None:

@@ -9,7 +9,7 @@ import html
 import json
 from pathlib import Path
 
-from agent import dag
+from contracts.functions import FUNCTIONS, authoring_order
 from agent.journal import Journal
 
 _CSS = """
@@ -49,7 +49,7 @@ def write_report(journal: Journal, title: str) -> Path:
         + "".join(
             f"<tr><td>{f}</td><td>{_attempts(journal, f)}</td><td class={'passed' if f in frozen else 'failed'}>"
             f"{'frozen at attempt ' + str(frozen[f]) if f in frozen else 'not frozen'}</td></tr>"
-            for f in dag.authoring_order()
+            for f in authoring_order()
         )
         + "</table>"
     )
@@ -57,7 +57,7 @@ def write_report(journal: Journal, title: str) -> Path:
         f"<p>Usage: {usage['input']} input, {usage['output']} output, {usage['cache_write']} cache-write, "
         f"{usage['cache_read']} cache-read tokens; ${usage['usd']:.2f}.</p>"
     )
-    for function in dag.authoring_order():
+    for function in authoring_order():
         n = _attempts(journal, function)
         if not n:
             continue
@@ -129,7 +129,7 @@ def _attempts(journal: Journal, function: str) -> int:
 def summary(journal: Journal) -> dict:
     """Per function: attempts and the check counts of its last report (for the manifest)."""
     out: dict[str, dict] = {}
-    for function in dag.FUNCTIONS:
+    for function in FUNCTIONS:
         n = _attempts(journal, function)
         report = journal.saved_report(function, n) if n else None
         if report:

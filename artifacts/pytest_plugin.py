@@ -12,7 +12,7 @@ from typing import ClassVar
 
 import pytest
 
-from agent import dag
+from contracts.functions import CODE_DEPS, authoring_order
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -55,7 +55,7 @@ class ArtifactSet(pytest.File):
     def collect(self):
         domain = self.path.parent.name
         yield IntegrityItem.from_parent(self, name=f"{domain}::integrity", domain=domain)
-        for function in dag.authoring_order():
+        for function in authoring_order():
             yield CheckItem.from_parent(
                 self, name=f"{domain}::{function}", domain=domain, function=function
             )
@@ -98,7 +98,7 @@ class CheckItem(pytest.Item):
             import sandbox
 
             self._executors[backend] = sandbox.open_executor(backend)
-        deps = {d: sources[d] for d in dag.CODE_DEPS[self.program]}
+        deps = {d: sources[d] for d in CODE_DEPS[self.program]}
         report = run_checks(
             self.domain,
             self.program,

@@ -8,7 +8,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from agent import dag
+from contracts.functions import FUNCTIONS
 from artifacts.errors import ArtifactError
 from artifacts.hashing import REPO
 from contracts.errors import UsageError
@@ -73,7 +73,7 @@ def diff_markdown(domain: str, rev: str = "HEAD", repo: Path = REPO) -> str:
         "|---|---|---|---|",
     ]
     changed = []
-    for f in dag.FUNCTIONS:
+    for f in FUNCTIONS:
         o = old_m.get("functions", {}).get(f, {})
         n = new_m.get("functions", {}).get(f, {})
         is_changed = o.get("sha256") != n.get("sha256")

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agent import dag
+from contracts.functions import authoring_order
 from artifacts.errors import ArtifactError
 from artifacts.store import verify
 
@@ -71,7 +71,7 @@ def load_modules(sources: dict[str, str], *, origin: str) -> dict[str, types.Mod
     modules: dict[str, types.ModuleType] = {}
     saved = {name: sys.modules.get(name) for name in sources}
     try:
-        for name in dag.authoring_order():
+        for name in authoring_order():
             if name not in sources:
                 continue
             spec = importlib.util.spec_from_loader(name, loader=None, origin=f"{origin}/{name}.py")

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agent import dag
+from contracts.functions import FUNCTIONS, dependencies
 from artifacts.errors import ArtifactError
 from artifacts.hashing import REPO, set_hash, sha256_bytes, sha256_text, tree_hash
 from contracts import ContractError, validate
@@ -36,13 +36,13 @@ def build_manifest(
     checks: dict[str, dict[str, int]] | None = None,
 ) -> dict[str, Any]:
     functions: dict[str, Any] = {}
-    for name in dag.FUNCTIONS:
+    for name in FUNCTIONS:
         if name not in sources:
             raise ArtifactError(f"cannot freeze {domain}: '{name}' has no passing draft")
         entry: dict[str, Any] = {
             "file": f"{name}.py",
             "sha256": sha256_text(sources[name]),
-            "depends_on": list(dag.dependencies(name)),
+            "depends_on": list(dependencies(name)),
         }
         if attempts and name in attempts:
             entry["attempts"] = attempts[name]
@@ -82,11 +82,11 @@ def freeze(
     try:
         if target.is_dir():  # keep files that are not part of the set (eval.json, README, …)
             for p in target.iterdir():
-                if p.is_file() and p.name not in {f"{n}.py" for n in dag.FUNCTIONS} | {
+                if p.is_file() and p.name not in {f"{n}.py" for n in FUNCTIONS} | {
                     "manifest.json"
                 }:
                     shutil.copy2(p, tmp / p.name)
-        for name in dag.FUNCTIONS:
+        for name in FUNCTIONS:
             (tmp / f"{name}.py").write_text(sources[name], encoding="utf-8")
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
         for p in tmp.iterdir():
@@ -122,7 +122,7 @@ def verify(domain: str, root: Path | None = None) -> tuple[dict[str, Any], dict[
             f"{path}: manifest is for domain '{manifest['domain']}', not '{domain}'"
         )
     sources: dict[str, str] = {}
-    for name in dag.FUNCTIONS:
+    for name in FUNCTIONS:
         entry = manifest["functions"].get(name)
         if entry is None:
             raise ArtifactError(f"{path}: manifest lists no '{name}'")

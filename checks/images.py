@@ -1,6 +1,7 @@
 """Image comparison for the image checks: per-object silhouette IoU and depth error, overlays.
 
-Design rule: pure numpy on arrays (no files, no simulator). Two renders of the same objects are
+Design rule: pure numpy on arrays (no simulator; `write_png` is the one function that writes,
+and only under the folder it is given). Two renders of the same objects are
 compared object by object, matched by record id (each side's mask holds indices into its own
 id list). The overlay is an RGB array people read in reports and the model receives: the
 reference image, the candidate's silhouettes over it, and where the silhouettes disagree.
@@ -10,6 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -54,8 +57,10 @@ def compare(
     """
     cm, rm = np.asarray(candidate["mask"]), np.asarray(reference["mask"])
     cd, rd = np.asarray(candidate["depth"], float), np.asarray(reference["depth"], float)
-    if cm.shape != rm.shape:
-        raise ValueError(f"mask shapes differ: {cm.shape} vs {rm.shape}")
+    if cm.shape != rm.shape or cd.shape != rm.shape or rd.shape != rm.shape:
+        raise ValueError(
+            f"image shapes differ: mask {cm.shape}, depth {cd.shape} vs the reference's {rm.shape}"
+        )
     index = {str(i): k for k, i in enumerate(candidate_ids)}
     out = []
     for k, oid in enumerate(reference_ids):
@@ -184,3 +189,24 @@ def overlay(
     diff[(ref >= 0) & (cand != -1) & (ref != cand)] = (240, 210, 40)
     sep = np.full((shape[0], 4, 3), 255, np.uint8)
     return np.concatenate([ref_rgb, sep, middle, sep, diff], axis=1)
+
+
+def write_png(out_dir: Any, name: str, rgb: np.ndarray, caption: str) -> list[dict[str, str]]:
+    """Write an overlay PNG under `out_dir` (nothing without one); its image entry for a check.
+
+    The name is reduced to letters, digits, '-' and '_': paths in a report always point into
+    the folder the checks were given.
+    """
+    if out_dir is None:
+        return []
+    import cv2
+
+    folder = Path(out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{safe_name(name)}.png"
+    cv2.imwrite(str(path), cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+    return [{"path": str(path), "caption": caption}]
+
+
+def safe_name(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)[:120]

@@ -2,10 +2,14 @@
 
 Design rule: a report is a plain dict valid against `check_report.schema.json`; checks appear
 in a fixed order (interface, schema, property, domain, image; within a category, the order the
-suite declares), `first_failure` is the first failing one, and nothing in it depends on the
-machine or the moment except the `duration_s` fields, so the same draft checked twice gives
-the same report once those are left out (`comparable`). `report_markdown` renders the short,
-specific text that goes into the model's prompt.
+suite declares), `first_failure` is the first check that did not pass, and "passed" means every
+required check ran and passed: a skipped check counts as a failure unless it was declared
+optional (with the reason the report shows), and a check that found nothing to examine is not a
+pass. Nothing depends on the machine or the moment except the timings (`duration_s`, and the
+metrics ending in ``_s``), so the same draft checked twice gives the same report once those are
+left out (`comparable`). Every string a draft could have put into a report (its exception
+messages, its ids) is made safe for a terminal, a file, HTML and a model. `report_markdown`
+renders the short, specific text that goes into the model's prompt.
 """
 
 from __future__ import annotations
@@ -19,12 +23,13 @@ from typing import Any, Literal
 
 import numpy as np
 
+from contracts.functions import FUNCTIONS
 from contracts.validate import to_jsonable, validate
+from sandbox.harness.wire import clean_text
 
 Category = Literal["interface", "schema", "property", "domain", "image"]
 Status = Literal["passed", "failed", "error", "skipped"]
 CATEGORIES: tuple[str, ...] = ("interface", "schema", "property", "domain", "image")
-FUNCTIONS = ("render", "perceive", "relate", "plan")
 MAX_TRACEBACK = 2500  # [chars] kept of a traceback (its end)
 MAX_TEXT = 1500  # [chars] of a message
 MAX_JSON = 6000  # [chars] of a JSON value shown (expected, actual, counterexample)
@@ -47,10 +52,16 @@ class CheckResult:
     metrics: dict[str, float | None] = field(default_factory=dict)
     images: list[dict[str, str]] = field(default_factory=list)
     duration_s: float | None = None
+    optional: str = ""  # why a skip of this check is no failure ("" : it is required)
 
     @property
     def failing(self) -> bool:
         return self.status in ("failed", "error")
+
+    @property
+    def passes(self) -> bool:
+        """Passed, or skipped where the check is optional."""
+        return self.status == "passed" or (self.status == "skipped" and bool(self.optional))
 
     def fail(self, message: str, **fields: Any) -> CheckResult:
         self.status = "failed"
@@ -60,9 +71,16 @@ class CheckResult:
         return self
 
     def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {"name": self.name, "category": self.category, "status": self.status}
-        if self.message:
-            d["message"] = _clip(self.message, MAX_TEXT)
+        status = self.status
+        message = self.message
+        if status == "passed" and self.examples == 0:  # nothing was examined: not a pass
+            status = "skipped"
+            message = message or "nothing to check: no case reached this check"
+        d: dict[str, Any] = {"name": self.name, "category": self.category, "status": status}
+        if self.optional:
+            d["optional"] = clean_text(self.optional)
+        if message:
+            d["message"] = clean_text(_clip(message, MAX_TEXT))
         for key in ("expected", "actual", "counterexample"):
             value = getattr(self, key)
             if value is not None:
@@ -72,7 +90,7 @@ class CheckResult:
         if self.examples is not None:
             d["examples"] = int(self.examples)
         if self.traceback:
-            d["traceback"] = trim_traceback(self.traceback)
+            d["traceback"] = clean_text(trim_traceback(self.traceback))
         if self.metrics:
             d["metrics"] = {k: _metric(v) for k, v in sorted(self.metrics.items())}
         if self.images:
@@ -84,6 +102,11 @@ class CheckResult:
     @staticmethod
     def from_dict(d: Mapping[str, Any]) -> CheckResult:
         return CheckResult(**{k: v for k, v in d.items()})
+
+
+def passes(check: Mapping[str, Any]) -> bool:
+    """A check dict passed, or was skipped and is optional."""
+    return check["status"] == "passed" or (check["status"] == "skipped" and "optional" in check)
 
 
 def _metric(v: Any) -> float | None:
@@ -114,9 +137,11 @@ def jsonable(value: Any, digits: int = 6) -> Any:
         return {str(k): jsonable(v, digits) for k, v in value.items()}
     if isinstance(value, list):
         return [jsonable(v, digits) for v in value]
-    if isinstance(value, bool | int | str) or value is None:
+    if isinstance(value, str):
+        return clean_text(value)
+    if isinstance(value, bool | int) or value is None:
         return value
-    return repr(value)
+    return clean_text(repr(value)[:MAX_TEXT])
 
 
 def order_checks(checks: Iterable[CheckResult | Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -135,7 +160,7 @@ def build_report(
 ) -> dict[str, Any]:
     """The check report dict (validated against its schema)."""
     ordered = order_checks(checks)
-    failing = [c["name"] for c in ordered if c["status"] in ("failed", "error")]
+    failing = [c["name"] for c in ordered if not passes(c)]
     report: dict[str, Any] = {
         "schema_version": 1,
         "domain": domain,
@@ -153,8 +178,15 @@ def build_report(
 
 def comparable(report: Mapping[str, Any]) -> dict[str, Any]:
     """The report without its timings: equal for equal drafts checked on equal inputs."""
+
+    def check(c: Mapping[str, Any]) -> dict[str, Any]:
+        out = {k: v for k, v in c.items() if k != "duration_s"}
+        if "metrics" in out:
+            out["metrics"] = {k: v for k, v in out["metrics"].items() if not k.endswith("_s")}
+        return out
+
     out = {k: v for k, v in report.items() if k != "duration_s"}
-    out["checks"] = [{k: v for k, v in c.items() if k != "duration_s"} for c in report["checks"]]
+    out["checks"] = [check(c) for c in report["checks"]]
     return out
 
 
@@ -206,7 +238,7 @@ def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
     """
     fn, checks = report["function"], report["checks"]
     passed = sum(c["status"] == "passed" for c in checks)
-    failing = [c for c in checks if c["status"] in ("failed", "error")]
+    failing = [c for c in checks if not passes(c)]
     skipped = sum(c["status"] == "skipped" for c in checks)
     if not failing:
         return f"**`{fn}` passed all {passed} checks** ({report['domain']})."
@@ -257,7 +289,7 @@ def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
 
 def images_of(report: Mapping[str, Any]) -> list[str]:
     """Paths of every image a report refers to, failing checks first."""
-    checks = sorted(report["checks"], key=lambda c: c["status"] not in ("failed", "error"))
+    checks = sorted(report["checks"], key=passes)
     return [i["path"] for c in checks for i in c.get("images", [])]
 
 

@@ -50,9 +50,19 @@ def format_path(path: Iterable[str | int]) -> str:
     return out
 
 
+MAX_ARRAY_ELEMENTS = 1_000_000  # an array in a contract value is a pose or a matrix, not an image
+
+
 def to_jsonable(value: Any) -> Any:
-    """The JSON form of a value holding numpy arrays/scalars and tuples (nothing else converted)."""
+    """The JSON form of a value holding numpy arrays/scalars and tuples (nothing else converted).
+
+    Raises:
+        ContractError: an array of more than `MAX_ARRAY_ELEMENTS` (listing it would cost more
+            memory than any contract value needs).
+    """
     if isinstance(value, np.ndarray):
+        if math.prod(max(d, 1) for d in value.shape) > MAX_ARRAY_ELEMENTS:  # (N, 0): N lists
+            raise ContractError("", f"an array of shape {value.shape} where a small value belongs")
         return value.tolist()
     if isinstance(value, np.generic):
         return value.item()

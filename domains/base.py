@@ -188,6 +188,8 @@ class Domain:
     # where generators and temporary places put objects (inside `workspace`)
     placement: ClassVar[Region] = Region(x=(0.32, 0.68), y=(-0.27, 0.27), reach=0.72)
     max_height: ClassVar[float] = 0.35  # highest allowed point of any object [m]
+    # the domain properties its drafts are checked for, by function (`checks.properties`)
+    properties: ClassVar[dict[str, list[tuple[str, dict[str, Any]]]]] = {}
 
     def __init__(self) -> None:
         self.task: str = (self.root / "task.md").read_text()

@@ -220,6 +220,8 @@ class CallReport:
             (an earlier call timed out or killed its process).
         value: the decoded return value when ok.
         seconds: from request to answer, measured outside the program's process [s].
+        cpu_seconds: CPU time the program used meanwhile (all its processes and threads in
+            the Docker backend), measured outside its process [s]; robust to a busy machine.
     """
 
     verdict: Literal["ok", "exception", "timeout", "oom", "crashed", "bad_output", "closed"]
@@ -227,6 +229,7 @@ class CallReport:
     exception: ExceptionInfo | None = None
     detail: str = ""
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
     exit_code: int | None = None
     signal: int | None = None
 

@@ -54,7 +54,7 @@ ROOT_PACKAGES = (
     "pillow",
 )
 # The project's own packages copied into the image (pure Python, part of the hash).
-PROJECT_PACKAGES = ("contracts", "toolbox")
+PROJECT_PACKAGES = ("contracts", "geometry", "toolbox")
 SANDBOX_DIR = Path(__file__).resolve().parent
 REPO = SANDBOX_DIR.parent
 REQUIREMENTS = SANDBOX_DIR / "requirements.txt"

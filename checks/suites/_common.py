@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from contracts.checks._hypo import Failure
-from contracts.checks.report import CheckResult, jsonable
+from checks.hypo import Failure
+from checks.report import CheckResult, jsonable
 
 
 def pose(value: Any) -> np.ndarray:

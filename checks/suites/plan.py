@@ -4,23 +4,26 @@ explicit infeasibility.
 Instances come from the domain's instance generator; hypothesis varies them — both scenes
 moved together, or the goal made a translation of the start (every object must move, often
 onto another's spot) — and shrinks towards the first instance as generated. A plan is applied
-with `contracts.checks.physics`: every step must pick a clear object and leave a collision-free,
+with `geometry.physics`: every step must pick a clear object and leave a collision-free,
 supported state inside the workspace, and the last state must match the goal within the
-domain's tolerance. The states' relations come from the frozen `relate` when the job carries
-it, else from the domain's reference relations (computed on the host).
+domain's tolerance. The states' relations come from the frozen `relate` when the draft has one
+(run by `checks.run` in a session of its own before the draft's: relations depend on the
+records only up to a common translation, which `relate`'s own checks hold it to), else from
+the domain's reference relations.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from hypothesis import strategies as st
 
-from contracts.checks._hypo import Failure, run_property
-from contracts.checks.physics import apply_plan
-from contracts.checks.report import CheckResult
-from contracts.checks.suite import SuiteContext
-from contracts.checks.suites._common import (
+from checks.hypo import Failure, run_property
+from geometry.physics import apply_plan
+from checks.report import CheckResult
+from checks.context import SuiteContext
+from checks.suites._common import (
     copy_records,
     first_difference,
     raised,
@@ -35,19 +38,23 @@ from contracts.validate import validate
 VARIANTS = ("as_generated", "both_moved", "goal_is_moved_start")
 
 
-def _state(ctx: SuiteContext, records: list[dict], reference: Any) -> dict[str, Any]:
-    relate = ctx.dependency("relate")
-    if relate is None:
-        return {"objects": copy_records(records), "relations": reference}
-    res = ctx.call(records, ctx.spec.fresh_meshes(), fn=relate, label="the frozen relate")
-    if not res.ok:
+@dataclass(frozen=True, kw_only=True)
+class Unrelated:
+    """Stands for the relations of a state on which the frozen `relate` failed."""
+
+    why: str
+    traceback: str = ""
+
+
+def _state(ctx: SuiteContext, records: list[dict], relations: Any) -> dict[str, Any]:
+    if isinstance(relations, Unrelated):
         raise Failure(
-            message=f"the frozen relate {res.describe()} on this state, so plan could not be "
+            message=f"the frozen relate {relations.why} on this state, so plan could not be "
             "checked on it",
-            traceback=res.traceback,
+            traceback=relations.traceback,
             error=True,
         )
-    return {"objects": copy_records(records), "relations": res.value}
+    return {"objects": copy_records(records), "relations": relations}
 
 
 def variant(ctx: SuiteContext, x: tuple) -> tuple[list, list, Any, Any, str] | None:
@@ -195,7 +202,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
             max_examples=ctx.examples("plan") + len(pool),
             seed=ctx.seed,
             examples=[*pool, (0, "goal_is_moved_start", 25, 0)],
-            shrink_calls=int(ctx.budget.get("shrink_calls", 20)),
+            shrink_calls=int(ctx.budget.shrink_calls),
         )
         r.examples = outcome.examples
         if outcome.failure:

@@ -11,10 +11,10 @@ from typing import Any
 
 from hypothesis import strategies as st
 
-from contracts.checks._hypo import Failure, run_property
-from contracts.checks.report import CheckResult
-from contracts.checks.suite import SuiteContext
-from contracts.checks.suites._common import (
+from checks.hypo import Failure, run_property
+from checks.report import CheckResult
+from checks.context import SuiteContext
+from checks.suites._common import (
     edge_multiset,
     first_difference,
     order_from_keys,
@@ -28,13 +28,14 @@ from contracts.checks.suites._common import (
 )
 from contracts.errors import ContractError
 from contracts.validate import validate
+from sandbox import MESHES
 
 
 def relations_of(ctx: SuiteContext, records: list[dict], label: str) -> Any:
     """relate(records) as a CallResult, cached by label for the checks that share inputs."""
     key = ("relate", label)
     if key not in ctx.cache:
-        ctx.cache[key] = ctx.call(records, ctx.spec.fresh_meshes(), label=label)
+        ctx.cache[key] = ctx.call(records, MESHES, label=label)
     return ctx.cache[key]
 
 
@@ -86,11 +87,13 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
     schema_ok = not out[-1].failing
 
     def declared(r: CheckResult) -> None:
-        rel = getattr(ctx.draft, "RELATIONS", None)
+        got = ctx.draft.attribute("RELATIONS")
+        rel = got.value if got.ok else None
+        ctx.outputs["RELATIONS"] = rel
         if not isinstance(rel, dict) or not rel:
             raise Failure(
                 message="the module must define RELATIONS: a non-empty dict {edge type: meaning}",
-                actual=type(rel).__name__ if rel is not None else "not defined",
+                actual=type(rel).__name__ if got.ok else f"not readable ({got.describe()})",
             )
         bad = [k for k, v in rel.items() if not isinstance(k, str) or not isinstance(v, str)]
         if bad:
@@ -114,7 +117,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
     def deterministic(r: CheckResult) -> None:
         n = min(len(scenes), ctx.examples("determinism"))
         for i in range(n):
-            again = ctx.call(scenes[i]["records"], ctx.spec.fresh_meshes(), label="again")
+            again = ctx.call(scenes[i]["records"], MESHES, label="again")
             first = base(i)
             if not (first.ok and again.ok):
                 continue
@@ -186,7 +189,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         return None
 
     def translation_check(r: CheckResult) -> None:
-        reach = int(ctx.budget.get("translation_mm", 150))
+        reach = int(ctx.budget.translation_mm)
         strategy = st.tuples(
             st.integers(0, n - 1), st.integers(-reach, reach), st.integers(-reach, reach)
         )

@@ -77,6 +77,17 @@ class Cubes(Domain):
     }
     on_gap = 0.008
     adjacent_gap = 0.012
+    properties = {
+        "relate": [
+            (
+                "relations_match_geometry",
+                {"kind": "on", "meaning": "(upper cube → cube it rests on)"},
+            ),
+            ("support_acyclic", {"kind": "on"}),
+        ],
+        "plan": [("temporary_places_clear", {"gap": 0.005})],
+        "perceive": [("physically_valid", {"penetration": 0.003, "contact": 0.004})],
+    }
 
     def make_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
         if index == 1:  # the authoring reference: a 3-2-1 pyramid facing the camera

@@ -16,15 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from contracts.errors import UsageError
+from contracts.functions import CODE_DEPS, FUNCTIONS
 
-FUNCTIONS = ("render", "perceive", "relate", "plan")
-# Whose source a function's checks load as modules (DESIGN's table; agent.dag declares it too).
-CODE_DEPS: dict[str, tuple[str, ...]] = {
-    "render": (),
-    "perceive": ("render",),
-    "relate": ("render",),
-    "plan": ("relate",),
-}
 
 
 def register(subparsers: Any) -> None:
@@ -84,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
 
     import domains
     import sandbox
-    from contracts.checks import report_markdown, run_checks
+    from checks import report_markdown, run_checks
 
     domains.load(args.domain)  # an unknown domain is a usage error, before any work
     source = _read(args.file, "draft")

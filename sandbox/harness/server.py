@@ -234,6 +234,7 @@ class Server:
             tmp_dir=tmp_dir,
             base_rss=base_rss,
             started=t0,
+            in_container=self.in_pid1,
         )
         head, _ = self.session.exchange(None, [], float(req["load_timeout_s"]), oom_before)
         head.update(kind="opened", id=req.get("id"), load_s=round(time.monotonic() - t0, 6))
@@ -368,6 +369,7 @@ class _Child:
         tmp_dir: str,
         base_rss: int,
         started: float,
+        in_container: bool,
     ) -> None:
         self.id, self.pid = id, pid
         self.req_w = req_w
@@ -385,6 +387,7 @@ class _Child:
         self.status: int | None = None
         self.rusage: Any = None
         self.dead = ""  # why the session can answer no more calls
+        self.in_container = in_container
 
     def exchange(
         self, request: bytes | None, sections: list[bytes], timeout: float, oom_before: Any
@@ -400,6 +403,7 @@ class _Child:
             self._die("the program wrote to its result channel out of turn")
             return self._verdict("bad_output", self.dead), []
         t0 = time.monotonic()
+        cpu0 = self.cpu_seconds()
         deadline = t0 + max(timeout, 0.0)
         pending = memoryview(request) if request is not None else memoryview(b"")
         frame, over_cap = None, False
@@ -433,6 +437,7 @@ class _Child:
                 if fd in self.fds:
                     self._read(fd)
         seconds = time.monotonic() - t0
+        cpu = self.cpu_seconds() - cpu0
         oom_after = _oom_kills()
         oom = oom_before is not None and oom_after is not None and oom_after > oom_before
         head: dict[str, Any]
@@ -456,7 +461,23 @@ class _Child:
         else:
             head = self._death()
         head["seconds"] = round(seconds, 6)
+        head["cpu_seconds"] = round(max(cpu, 0.0), 6)
         return head, out
+
+    def cpu_seconds(self) -> float:
+        """CPU time used so far by the program: the container's whole account inside the
+        sandbox (every process and thread the program started; the harness idles meanwhile),
+        else the program's own process [s]. Unlike wall time, it does not grow when the
+        machine is busy with other work."""
+        used = _cgroup_cpu_seconds() if self.in_container else None
+        if used is not None:
+            return used
+        try:
+            with open(f"/proc/{self.pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        except (OSError, ValueError, IndexError):
+            return 0.0
 
     def _readable_result(self) -> bool:
         for fd, kind in list(self.fds.items()):
@@ -702,6 +723,24 @@ def _status_kib(key: str) -> int:
             if line.startswith(key + ":"):
                 return int(line.split()[1])
     return 0
+
+
+def _cgroup_cpu_seconds() -> float | None:
+    """CPU time the container's cgroup has used (v2 or v1) [s], None where unreadable."""
+    try:
+        with open("/sys/fs/cgroup/cpu.stat") as f:
+            for line in f:
+                if line.startswith("usage_usec "):
+                    return int(line.split()[1]) / 1e6
+    except OSError:
+        pass
+    for path in ("/sys/fs/cgroup/cpuacct/cpuacct.usage", "/sys/fs/cgroup/cpu,cpuacct/cpuacct.usage"):
+        try:
+            with open(path) as f:
+                return int(f.read()) / 1e9
+        except (OSError, ValueError):
+            continue
+    return None
 
 
 def _oom_kills() -> int | None:

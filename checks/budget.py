@@ -1,0 +1,93 @@
+"""How much checking one draft gets, and the time budgets its calls must keep.
+
+Two kinds of time budget: a hard per-call limit (`call_timeout`, enforced by the sandbox from
+outside the draft's process: a call that overruns is killed) and the online budget
+(`ONLINE_BUDGET`, the median over the suite's calls that `interface.fast_enough` checks). The
+online pass of a policy — perceive twice, relate twice, plan once — should take under a second
+on one core, as the people-written programs do; the budgets below leave each function about
+twice what those programs need.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+ONLINE_BUDGET: dict[str, float] = {  # [s] median per call
+    "render": 1.0,  # not in the online pass: it checks perceive (and people read its images)
+    "perceive": 0.6,
+    "relate": 0.2,
+    "plan": 0.6,
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Budget:
+    """How much checking one draft gets.
+
+    Attributes:
+        seed: seeds hypothesis (the instances have their own seeds).
+        instance_seeds: generator seeds of the instances every suite draws from.
+        observations: (instance index, "start" | "goal", camera name) perceived by `perceive`.
+        render_cases: (instance index, side, camera) rendered by `render` for the images.
+        examples: hypothesis examples per property family (beyond the explicit ones).
+        call_timeout: hard per-call limit of each function [s].
+        load_timeout: how long a program may take to import [s].
+        online: median per-call budget of each function [s] (`ONLINE_BUDGET`).
+    """
+
+    name: str
+    seed: int = 20250601
+    instance_seeds: tuple[int, ...] = tuple(range(1, 9))
+    observations: tuple[tuple[int, str, str], ...] = (
+        (0, "start", "front"),
+        (1, "goal", "view1"),
+        (2, "start", "view2"),
+        (3, "goal", "front"),
+    )
+    render_cases: tuple[tuple[int, str, str], ...] = (
+        (0, "goal", "front"),
+        (1, "start", "view1"),
+        (2, "goal", "view2"),
+    )
+    examples: Mapping[str, int] = field(
+        default_factory=lambda: {
+            "plan": 12,
+            "order": 12,
+            "translation": 12,
+            "determinism": 2,
+            "identity": 3,
+        }
+    )
+    call_timeout: Mapping[str, float] = field(
+        default_factory=lambda: {"render": 10.0, "perceive": 10.0, "relate": 5.0, "plan": 10.0}
+    )
+    load_timeout: float = 60.0
+    online: Mapping[str, float] = field(default_factory=lambda: dict(ONLINE_BUDGET))
+    hard_observations: int = 1  # plus the most occluded views of `hard_seeds`' instances
+    hard_seeds: tuple[int, ...] = tuple(range(1, 17))
+    shrink_calls: int = 20
+    translation_mm: int = 150  # largest common shift `relate`'s invariance property tries
+
+
+DEFAULT = Budget(name="default")
+THOROUGH = Budget(
+    name="thorough",
+    instance_seeds=tuple(range(1, 25)),
+    observations=tuple(
+        (i, side, cam)
+        for i, (side, cam) in enumerate(
+            [(s, c) for s in ("start", "goal") for c in ("front", "view1", "view2")] * 2
+        )
+    ),
+    render_cases=tuple(
+        (i, side, cam)
+        for i, (side, cam) in enumerate(
+            [(s, c) for s in ("start", "goal") for c in ("front", "view1", "view2")]
+        )
+    ),
+    examples={"plan": 60, "order": 50, "translation": 50, "determinism": 4, "identity": 8},
+    hard_observations=3,
+    hard_seeds=tuple(range(1, 41)),
+    shrink_calls=60,
+)

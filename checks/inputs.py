@@ -1,0 +1,255 @@
+"""The cases a suite checks a draft on, built on the host from the domain and the simulator.
+
+Design rule: inputs come from the domain's seeded instance generator, never only from the
+reference instance, and every case keeps its ground truth beside the arguments the draft will
+get: the true records of an observation, the simulator's image of a scene, the reference
+relations of a state. Only the arguments ever reach the draft. Everything is seeded and
+cached, so the same draft gets the same cases.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+import domains
+from checks.budget import Budget
+from contracts.errors import UsageError
+from contracts.functions import FUNCTIONS
+from domains import Domain
+
+HALF_RES = 2  # image checks render at 1/2 of the domain cameras' resolution
+PROPERTY_RES = 4  # render's property checks at 1/4
+
+
+@lru_cache(maxsize=256)
+def _instance(domain_name: str, seed: int) -> domains.Instance | None:
+    try:
+        return domains.load(domain_name).generate(seed, physics=False)
+    except domains.GenerationError:
+        return None
+
+
+def instances(domain: Domain, seeds: tuple[int, ...]) -> list[domains.Instance]:
+    """Generated instances for `seeds` (a seed the generator cannot serve is replaced by the
+    next unused one, deterministically)."""
+    out, used, extra = [], set(seeds), max(seeds, default=0) + 1000
+    for s in seeds:
+        inst = _instance(domain.name, s)
+        while inst is None:
+            while extra in used:
+                extra += 1
+            used.add(extra)
+            inst = _instance(domain.name, extra)
+        out.append(inst)
+    return out
+
+
+def records(scene: Mapping) -> list[dict]:
+    return [
+        {"id": o["id"], "mesh": o["mesh"], "pose": np.asarray(o["pose"], float)}
+        for o in scene["objects"]
+    ]
+
+
+def camera(domain: Domain, name: str, scale: int = 1) -> dict:
+    """Camera `name` of the domain at 1/`scale` of its resolution (same view, centred)."""
+    spec = domain.cameras[name]
+    small = dataclasses.replace(spec, width=spec.width // scale, height=spec.height // scale)
+    return small.to_camera()
+
+
+@lru_cache(maxsize=64)
+def _observation(domain_name: str, seed: int, side: str, cam: str, scale: int) -> dict[str, Any]:
+    """The simulator's clean view (rgb, depth, mask) of an instance's scene."""
+    from sim.render import observe
+
+    domain = domains.load(domain_name)
+    inst = _instance(domain_name, seed)
+    assert inst is not None
+    scene = inst.start if side == "start" else inst.goal
+    return observe(domain, scene, camera(domain, cam, scale), noise=None, mask=True)
+
+
+def _noisy(view: Mapping[str, Any], seed: int) -> dict[str, Any]:
+    """A clean view with the depth sensor's noise (seeded): what `perceive` gets."""
+    from sim.render import apply_depth_noise
+
+    return {**view, "depth": apply_depth_noise(view["depth"], np.random.default_rng(seed))}
+
+
+def _subsample(view: Mapping[str, Any], scale: int) -> dict[str, Any]:
+    """Every `scale`-th pixel of a view: the view of the camera at 1/`scale` resolution, to a
+    fraction of a pixel."""
+    return {k: np.ascontiguousarray(view[k][::scale, ::scale]) for k in ("rgb", "depth", "mask")}
+
+
+def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]:
+    """The cases of `function`'s suite.
+
+    - render: ``scenes``: {name, records, camera, image (compared with the simulator),
+      reference (the simulator's rgb/depth/mask, for image cases)};
+    - perceive: ``observations``: {name, observation (rgb, noisy depth, camera), camera,
+      render_camera, truth (true records), reference (the simulator's clean view at the
+      render camera's resolution and the full-size observation)};
+    - relate: ``scenes``: {name, records, reference (relations)};
+    - plan: ``instances``: {name, start, goal, start_relations, goal_relations, order_len},
+      ``infeasible``: goals no plan reaches, with why.
+    """
+    pool = instances(domain, budget.instance_seeds)
+    cases: dict[str, Any] = {}
+
+    def scene_of(i: int, side: str) -> list[dict]:
+        return records(pool[i].start if side == "start" else pool[i].goal)
+
+    if function == "relate":
+        cases["scenes"] = [
+            {
+                "name": f"{inst.name}/{side}",
+                "records": scene_of(i, side),
+                "reference": domain.relate(scene_of(i, side)),
+            }
+            for i, inst in enumerate(pool)
+            for side in ("start", "goal")
+        ]
+    elif function == "plan":
+        cases["instances"] = [
+            {
+                "name": inst.name,
+                "start": scene_of(i, "start"),
+                "goal": scene_of(i, "goal"),
+                "start_relations": domain.relate(scene_of(i, "start")),
+                "goal_relations": domain.relate(scene_of(i, "goal")),
+                "order_len": len(inst.order),
+            }
+            for i, inst in enumerate(pool)
+        ]
+        cases["infeasible"] = infeasible_cases(domain, pool[0])
+    elif function == "render":
+        scenes = []
+        for k, (i, side, cam) in enumerate(budget.render_cases):
+            i = i % len(pool)
+            recs = scene_of(i, side)
+            name = f"{pool[i].name}/{side}/{cam}"
+            scenes.append(
+                {
+                    "name": name,
+                    "records": recs,
+                    "camera": camera(domain, cam, HALF_RES),
+                    "camera_name": cam,
+                    "image": True,
+                    "reference": _observation(domain.name, pool[i].seed, side, cam, HALF_RES),
+                }
+            )
+            if k == 0:  # a small view for the cheap properties
+                scenes.insert(
+                    0,
+                    {
+                        "name": f"{name}@1/{PROPERTY_RES}",
+                        "records": recs,
+                        "camera": camera(domain, cam, PROPERTY_RES),
+                        "camera_name": cam,
+                    },
+                )
+        cases["scenes"] = scenes
+    elif function == "perceive":
+        obs = []
+        chosen = [(i % len(pool), side, cam) for i, side, cam in budget.observations]
+        search = instances(domain, budget.hard_seeds)
+        for i, side, cam in _hardest(domain.name, budget.hard_seeds, budget.hard_observations):
+            if (search[i].seed, side, cam) not in {(pool[j].seed, s_, c) for j, s_, c in chosen}:
+                pool = [*pool, search[i]]
+                chosen.append((len(pool) - 1, side, cam))
+        for i, side, cam in chosen:
+            i = i % len(pool)
+            recs = scene_of(i, side)
+            clean = _observation(domain.name, pool[i].seed, side, cam, 1)
+            full = _noisy(clean, pool[i].seed or 0)
+            obs.append(
+                {
+                    "name": f"{pool[i].name}/{side}/{cam}",
+                    "observation": {
+                        "rgb": full["rgb"],
+                        "depth": full["depth"],
+                        "camera": full["camera"],
+                    },
+                    "camera": full["camera"],
+                    "camera_name": cam,
+                    "render_camera": camera(domain, cam, HALF_RES),
+                    "truth": recs,
+                    "reference": {**_subsample(clean, HALF_RES), "full": full},
+                }
+            )
+        cases["observations"] = obs
+    else:
+        raise UsageError(f"unknown function '{function}'; known: {', '.join(FUNCTIONS)}")
+    return cases
+
+
+@lru_cache(maxsize=16)
+def _hardest(domain_name: str, seeds: tuple[int, ...], n: int) -> list[tuple[int, str, str]]:
+    domain = domains.load(domain_name)
+    return hardest_views(domain, instances(domain, seeds), n, exclude=[])
+
+
+def hardest_views(
+    domain: Domain, pool: list, n: int, *, exclude: list[tuple[int, str, str]]
+) -> list[tuple[int, str, str]]:
+    """The `n` (instance, side, camera) views whose least visible object shows the fewest
+    pixels: the views perception finds hardest, so that the checks see occlusion whenever the
+    generator produces it. A view hiding an object entirely counts only when the object can be
+    inferred — it holds up another object — since nothing could find it otherwise."""
+    if n <= 0:
+        return []
+    from toolbox import render_scene
+
+    meshes = domain.meshes()
+    scored = []
+    for i, inst in enumerate(pool):
+        for side in ("start", "goal"):
+            recs = records(inst.start if side == "start" else inst.goal)
+            graph = domain.relate(recs)
+            supporters = {e["target"] for e in graph["edges"] if e["type"] == "on"}
+            for cam in domain.cameras:
+                if (i, side, cam) in exclude:
+                    continue
+                mask = render_scene(recs, meshes, camera(domain, cam, HALF_RES))["mask"]
+                areas = np.bincount(mask[mask >= 0].ravel(), minlength=len(recs))
+                hidden = [r["id"] for r, a in zip(recs, areas, strict=True) if a == 0]
+                if any(h not in supporters for h in hidden):
+                    continue
+                scored.append((int(areas.min()), i, side, cam))
+    scored.sort(key=lambda t: (t[0], t[1], t[2], t[3]))
+    return [(i, side, cam) for _, i, side, cam in scored[:n]]
+
+
+def infeasible_cases(domain: Domain, inst: domains.Instance) -> list[dict[str, Any]]:
+    """Goals no plan can reach, made from an instance: a floating object, two objects in one
+    place."""
+    start = records(inst.start)
+    goal = records(inst.goal)
+    floating = [dict(r, pose=r["pose"].copy()) for r in goal]
+    low = min(range(len(floating)), key=lambda k: floating[k]["pose"][2, 3])
+    floating[low]["pose"][2, 3] += 0.10
+    overlap = [dict(r, pose=r["pose"].copy()) for r in goal]
+    overlap[1]["pose"] = overlap[0]["pose"].copy()
+    out = []
+    for name, g, why in (
+        ("floating", floating, f"'{floating[low]['id']}' floats 100 mm above its support"),
+        ("overlap", overlap, f"'{overlap[1]['id']}' and '{overlap[0]['id']}' share one place"),
+    ):
+        out.append(
+            {
+                "name": f"{inst.name}/{name}",
+                "start": start,
+                "goal": g,
+                "start_relations": domain.relate(start),
+                "goal_relations": domain.relate(g),
+                "why": why,
+            }
+        )
+    return out

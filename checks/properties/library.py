@@ -1,0 +1,437 @@
+"""The library of domain properties (see `checks.properties`): one function per property.
+
+Each is ``(ctx: SuiteContext, **params) -> CheckResult`` with category "domain"; it reads the
+draft's results the generic suite already obtained (cached in the context) and calls the draft
+only for what it alone needs. Geometry is the oracle's (`geometry`), ground truth the cases'.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import networkx as nx
+import numpy as np
+
+from checks.context import SuiteContext
+from checks.report import CheckResult
+from checks.suites._common import edge_multiset, scene_spec
+from contracts import se3
+from geometry.physics import apply_plan, body_separation, scene_problems, supports
+
+LIBRARY: dict[str, Callable[..., CheckResult]] = {}
+YAW_ONLY_TOL = np.radians(3.0)  # a turn about the vertical, within this tilt [rad]
+
+
+def _register(fn: Callable[..., CheckResult]) -> Callable[..., CheckResult]:
+    LIBRARY[fn.__name__] = fn
+    return fn
+
+
+def _result(name: str, expected: str) -> CheckResult:
+    return CheckResult(name=f"domain.{name}", category="domain", expected=expected)
+
+
+# -- relate -------------------------------------------------------------------------------------
+
+
+def _typed_edges(graph: Any, kind: str) -> set[tuple[str, str]]:
+    return {(s, t) for (s, t, k) in edge_multiset(graph) if k == kind}
+
+
+def _graphs(ctx: SuiteContext) -> list[dict] | None:
+    from checks.suites.relate import relations_of
+
+    out = []
+    for sc in ctx.cases["scenes"]:
+        res = relations_of(ctx, sc["records"], f"scene {sc['name']}")
+        if not res.ok or not isinstance(res.value, dict):
+            return None
+        out.append(res.value)
+    return out
+
+
+def _matching_type(ctx: SuiteContext, kind: str) -> tuple[str | None, str | None, dict]:
+    """The draft's edge type whose edges are the reference's `kind` edges on every scene.
+
+    Returns (matching type or None, best candidate type, details of the first mismatch).
+    """
+    key = ("matching_type", kind)
+    if key in ctx.cache:
+        return ctx.cache[key]
+    graphs = _graphs(ctx)
+    if graphs is None:
+        ctx.cache[key] = (None, None, {})
+        return ctx.cache[key]
+    types = sorted({k for g in graphs for (_, _, k) in edge_multiset(g)})
+    score: Counter = Counter()
+    first_miss: dict[str, dict] = {}
+    for sc, g in zip(ctx.cases["scenes"], graphs, strict=True):
+        ref = _typed_edges(sc["reference"], kind)
+        for t in types:
+            got = _typed_edges(g, t)
+            score[t] += len(ref & got) - len(ref ^ got)
+            if got != ref and t not in first_miss:
+                first_miss[t] = {
+                    "scene": sc,
+                    "expected": sorted(ref),
+                    "actual": sorted(got),
+                    "missing": sorted(ref - got),
+                    "extra": sorted(got - ref),
+                }
+    exact = [t for t in types if t not in first_miss]
+    if kind in exact:
+        found: tuple = (kind, kind, {})
+    elif exact:
+        found = (exact[0], exact[0], {})
+    else:
+        best = max(types, key=lambda t: (score[t], t == kind)) if types else None
+        found = (None, best, first_miss.get(best, {}) if best else {})
+    ctx.cache[key] = found
+    return found
+
+
+@_register
+def relations_match_geometry(ctx: SuiteContext, kind: str, meaning: str) -> CheckResult:
+    """Some declared edge type is exactly the reference's `kind` edges on every scene."""
+    r = _result(
+        "relations_match_geometry",
+        f"one edge type whose edges are exactly {meaning} (the reference's '{kind}' edges), "
+        f"e.g. '{kind}'",
+    )
+    match, best, miss = _matching_type(ctx, kind)
+    r.examples = len(ctx.cases["scenes"])
+    if match is not None:
+        return r
+    if best is None:
+        return r.fail("relate returned no usable graphs, or no edges at all, on the scenes")
+    sc = miss["scene"]
+    reversed_ = sorted((t, s) for (s, t) in miss["actual"]) == miss["expected"]
+    hint = " (every edge points the wrong way round)" if reversed_ else ""
+    return r.fail(
+        f"no edge type captures {meaning}; the closest, '{best}', differs on scene {sc['name']}: "
+        f"missing {miss['missing']}, extra {miss['extra']}{hint}",
+        expected=miss["expected"],
+        actual=miss["actual"],
+        counterexample=scene_spec(ctx.spec.name, sc["records"]),
+    )
+
+
+@_register
+def support_acyclic(ctx: SuiteContext, kind: str = "on") -> CheckResult:
+    """The support edges form no cycle, and every object off the table rests on something."""
+    from checks.suites.relate import relations_of
+
+    r = _result(
+        "support_acyclic",
+        "support edges without cycles; every object that does not touch the table rests on one",
+    )
+    _, found, _ = _matching_type(ctx, kind)
+    found = found or kind
+    for sc in ctx.cases["scenes"]:
+        res = relations_of(ctx, sc["records"], f"scene {sc['name']}")
+        if not res.ok or not isinstance(res.value, dict):
+            continue
+        edges = _typed_edges(res.value, found)
+        g = nx.DiGraph(list(edges))
+        if not nx.is_directed_acyclic_graph(g):
+            cycle = nx.find_cycle(g)
+            return r.fail(
+                f"the '{found}' edges contain a cycle {cycle} on scene {sc['name']}",
+                counterexample=scene_spec(ctx.spec.name, sc["records"]),
+            )
+        for body in ctx.spec.geometry.bodies(sc["records"]):
+            if body.lowest > 0.002 and not any(s == body.id for (s, _) in edges):
+                return r.fail(
+                    f"'{body.id}' stands {1000 * body.lowest:.0f} mm above the table on scene "
+                    f"{sc['name']} but has no '{found}' edge to what it rests on",
+                    counterexample=scene_spec(ctx.spec.name, sc["records"]),
+                )
+    r.examples = len(ctx.cases["scenes"])
+    return r
+
+
+# -- plan ---------------------------------------------------------------------------------------
+
+
+def _plans(ctx: SuiteContext):
+    """(instance, start, goal, steps) for every instance whose plan came back ok."""
+    from checks.suites.plan import plan_of
+
+    for i, inst in enumerate(ctx.cases["instances"]):
+        got = plan_of(ctx, (i, "as_generated", 0, 0))
+        if got is None:
+            continue
+        res, (s, g, *_rest) = got
+        if not res.ok or not isinstance(res.value, dict) or res.value.get("status") != "ok":
+            continue
+        steps = res.value.get("steps")
+        if isinstance(steps, list):
+            yield inst, s, g, steps
+
+
+def _states(start: list[dict], steps: list) -> list[tuple[int, str, dict[str, dict]]]:
+    """(step, moved object, state after it) for the steps that name known objects."""
+    state = {o["id"]: dict(o, pose=np.asarray(o["pose"], float)) for o in start}
+    out = []
+    for k, step in enumerate(steps):
+        oid = step.get("object") if isinstance(step, dict) else None
+        if oid not in state:
+            break
+        try:
+            T = se3.as_matrix(step["target_pose"])
+        except (KeyError, TypeError, ValueError):
+            break
+        state = {**state, oid: dict(state[oid], pose=T)}
+        out.append((k, oid, state))
+    return out
+
+
+def _at_goal(ctx: SuiteContext, record: dict, goal: dict[str, np.ndarray]) -> bool:
+    oid = record["id"]
+    return oid in goal and se3.within_tolerance(
+        record["pose"],
+        goal[oid],
+        trans_tol=ctx.spec.trans_tol,
+        rot_tol=ctx.spec.rot_tol,
+        symmetries=ctx.spec.symmetries.get(record["mesh"]),
+    )
+
+
+def _plan_failure(r: CheckResult, ctx: SuiteContext, inst, s, g, steps, k, message) -> CheckResult:
+    return r.fail(
+        f"step {k}: {message} (instance {inst['name']})",
+        actual=steps[: k + 1],
+        counterexample={
+            "start": scene_spec(ctx.spec.name, s),
+            "goal": scene_spec(ctx.spec.name, g),
+        },
+    )
+
+
+@_register
+def temporary_places_clear(ctx: SuiteContext, gap: float) -> CheckResult:
+    """An object put down anywhere but its goal keeps `gap` [m] from every other object."""
+    r = _result(
+        "temporary_places_clear",
+        f"an object put down aside is at least {gap * 1000:.0f} mm from every other (the fingers "
+        "must reach it later)",
+    )
+    n = 0
+    for inst, s, g, steps in _plans(ctx):
+        n += 1
+        goal = {o["id"]: np.asarray(o["pose"], float) for o in g}
+        for k, oid, state in _states(s, steps):
+            if _at_goal(ctx, state[oid], goal):
+                continue  # a goal placement may touch its neighbours
+            body = ctx.spec.geometry.body(state[oid])
+            for j, other in state.items():
+                if j == oid:
+                    continue
+                d, _ = body_separation(body, ctx.spec.geometry.body(other), cutoff=gap)
+                if d < gap:
+                    return _plan_failure(
+                        r, ctx, inst, s, g, steps, k,
+                        f"puts '{oid}' down aside only {max(d, 0) * 1000:.1f} mm from '{j}'",
+                    )  # fmt: skip
+    r.examples = n
+    return r
+
+
+@_register
+def turns_about_vertical(ctx: SuiteContext) -> CheckResult:
+    """Every step turns its object about the vertical only (top-down grasps keep its tilt)."""
+    r = _result(
+        "turns_about_vertical",
+        "each target pose is the object's current pose turned about the vertical (modulo its "
+        f"symmetry), within {np.degrees(YAW_ONLY_TOL):.0f}°",
+    )
+    n = 0
+    for inst, s, g, steps in _plans(ctx):
+        n += 1
+        before = {o["id"]: np.asarray(o["pose"], float) for o in s}
+        for k, oid, state in _states(s, steps):
+            R_from, R_to = before[oid][:3, :3], state[oid]["pose"][:3, :3]
+            syms = ctx.spec.symmetries.get(state[oid]["mesh"], [np.eye(4)])
+            tilt = min(
+                float(np.arccos(np.clip((R_to @ S[:3, :3] @ R_from.T)[2, 2], -1, 1)))
+                for S in syms
+            )
+            if tilt > YAW_ONLY_TOL:
+                return _plan_failure(
+                    r, ctx, inst, s, g, steps, k,
+                    f"tilts '{oid}' by {np.degrees(tilt):.1f}° (a top-down grasp can only turn "
+                    "it about the vertical)",
+                )  # fmt: skip
+            before[oid] = state[oid]["pose"]
+    r.examples = n
+    return r
+
+
+@_register
+def no_stacking(ctx: SuiteContext) -> CheckResult:
+    """No object ever rests on another: every state lies flat on the table."""
+    r = _result("no_stacking", "after every step each object rests on the table alone")
+    n = 0
+    for inst, s, g, steps in _plans(ctx):
+        n += 1
+        for k, oid, state in _states(s, steps):
+            sup = supports(ctx.spec.geometry.bodies(list(state.values())))
+            for who, how in sup.items():
+                others = [x for x in how.on if x != "table"]
+                if others:
+                    return _plan_failure(
+                        r, ctx, inst, s, g, steps, k,
+                        f"puts '{who}' on {others} (pieces never go on top of each other)",
+                    )  # fmt: skip
+    r.examples = n
+    return r
+
+
+@_register
+def temporary_clear_of_goals(ctx: SuiteContext) -> CheckResult:
+    """An object put down aside never takes the goal place of an object still to be placed."""
+    r = _result(
+        "temporary_clear_of_goals",
+        "an object put down anywhere but its goal does not overlap the goal place of any object "
+        "not yet there",
+    )
+    n = 0
+    geometry = ctx.spec.geometry
+    for inst, s, g, steps in _plans(ctx):
+        n += 1
+        goal = {o["id"]: np.asarray(o["pose"], float) for o in g}
+        meshes = {o["id"]: o["mesh"] for o in g}
+        for k, oid, state in _states(s, steps):
+            if _at_goal(ctx, state[oid], goal):
+                continue
+            body = geometry.body(state[oid])
+            for j, T in goal.items():
+                if j == oid or _at_goal(ctx, state[j], goal):
+                    continue
+                d, _ = body_separation(
+                    body, geometry.body({"id": j, "mesh": meshes[j], "pose": T}), cutoff=0.0
+                )
+                if d < -0.001:
+                    return _plan_failure(
+                        r, ctx, inst, s, g, steps, k,
+                        f"puts '{oid}' down aside where '{j}' must go ({-d * 1000:.0f} mm into "
+                        "its goal place)",
+                    )  # fmt: skip
+    r.examples = n
+    return r
+
+
+# -- perceive -----------------------------------------------------------------------------------
+
+
+def _perceived(ctx: SuiteContext):
+    """(case, records) for every observation whose records passed the schema."""
+    perceived = ctx.outputs.get("perceived", {})
+    for case in ctx.cases["observations"]:
+        recs = perceived.get(case["name"])
+        if recs is not None:
+            yield case, recs
+
+
+@_register
+def physically_valid(ctx: SuiteContext, penetration: float, contact: float) -> CheckResult:
+    """The perceived objects do not interpenetrate and each rests on the table or on others."""
+    from checks.suites.perceive import where
+
+    r = _result(
+        "physically_valid",
+        f"perceived objects that rest on the table or on each other (within "
+        f"{contact * 1000:.0f} mm), interpenetrating by at most {penetration * 1000:.0f} mm, "
+        "each with its centre of mass over its support",
+    )
+    n = 0
+    for case, recs in _perceived(ctx):
+        n += 1
+        known = [o for o in recs if o["mesh"] in ctx.spec.geometry.parts]
+        problems = scene_problems(
+            ctx.spec.geometry, known, pen_tol=penetration, contact_tol=contact
+        )
+        if problems:
+            return r.fail(
+                f"the state perceived in {case['name']} is not physically possible: "
+                + "; ".join(problems[:3]),
+                actual=problems[:5],
+                counterexample=where(ctx, case),
+            )
+    r.examples = n
+    return r
+
+
+@_register
+def upright(ctx: SuiteContext, tolerance_deg: float) -> CheckResult:
+    """Every perceived object stands in its canonical resting pose (turned about the vertical,
+    modulo its symmetry): flat pieces lie flat, nothing is mirrored or on its side."""
+    from checks.suites.perceive import where
+
+    tol = np.radians(tolerance_deg)
+    r = _result(
+        "upright",
+        f"each perceived object's up axis within {tolerance_deg:g}° of the vertical (modulo its "
+        "symmetry)",
+    )
+    n = 0
+    for case, recs in _perceived(ctx):
+        n += 1
+        for o in recs:
+            R = np.asarray(o["pose"], float)[:3, :3]
+            syms = ctx.spec.symmetries.get(o["mesh"], [np.eye(4)])
+            tilt = min(float(np.arccos(np.clip((R @ S[:3, :3])[2, 2], -1, 1))) for S in syms)
+            if tilt > tol:
+                return r.fail(
+                    f"'{o['id']}' is perceived tilted by {np.degrees(tilt):.0f}° in {case['name']}",
+                    counterexample=where(ctx, case),
+                )
+    r.examples = n
+    return r
+
+
+@_register
+def ids_follow_the_image(ctx: SuiteContext) -> CheckResult:
+    """Objects of the same shape keep their own ids: each perceived record sits, in the image,
+    on the object of that id and not on another of the same shape."""
+    from checks.suites.perceive import where
+
+    r = _result(
+        "ids_follow_the_image",
+        "a perceived object of a shape several objects share sits where the image shows that "
+        "object, not another of its shape",
+    )
+    same_shape = {
+        oid
+        for oid, mesh in ctx.spec.catalogue.items()
+        if sum(m == mesh for m in ctx.spec.catalogue.values()) > 1
+    }
+    n = 0
+    for case, recs in _perceived(ctx):
+        n += 1
+        ids = [o["id"] for o in case["truth"]]
+        mask = case["reference"]["mask"]  # the simulator's mask at the render camera
+        cam = case["render_camera"]
+        K, T = np.asarray(cam["K"], float), np.asarray(cam["T_world_camera"], float)
+        for o in recs:
+            if o["id"] not in same_shape:
+                continue
+            centre = ctx.spec.geometry.body(o).com
+            p = se3.inverse(T) @ np.append(centre, 1.0)
+            if p[2] <= 0:
+                continue
+            u, v = (K @ (p[:3] / p[2]))[:2]
+            if not (0 <= int(v) < mask.shape[0] and 0 <= int(u) < mask.shape[1]):
+                continue
+            label = int(mask[int(v), int(u)])
+            shown = ids[label] if 0 <= label < len(ids) else None
+            if shown in same_shape and shown != o["id"] and ctx.spec.catalogue[shown] == o["mesh"]:
+                return r.fail(
+                    f"'{o['id']}' is perceived where the image shows '{shown}' (same shape, other "
+                    f"object) in {case['name']}",
+                    counterexample=where(ctx, case),
+                )
+    r.examples = n
+    return r
