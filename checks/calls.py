@@ -79,6 +79,7 @@ class DraftCalls:
         session: the sandbox session holding the program.
         module: the module whose function is judged (e.g. "plan").
         budget: per-call budget of that function [s].
+        calls: how many calls were made.
         seconds: (label, CPU seconds) of every call of the judged function that returned: the
             time it needs on one core, whatever else the machine is doing.
         failures: (label, CallResult) of calls that timed out or ended the process.
@@ -87,12 +88,14 @@ class DraftCalls:
     session: Session
     module: str
     budget: float
+    calls: int = 0
     seconds: list[tuple[str, float]] = field(default_factory=list)
     failures: list[tuple[str, CallResult]] = field(default_factory=list)
 
     def __call__(self, *args: Any, label: str = "", function: str | None = None) -> CallResult:
         """Call ``module.function(*args)`` (the judged function by default)."""
         name = function or self.module
+        self.calls += 1
         result = CallResult.of(
             self.session.call(self.module, name, *args, timeout_s=self.budget), self.budget
         )

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import domains
-from agent import dag
+from contracts.functions import FUNCTIONS
 from agent.context import build_context, reference_observations
 from agent.extract import extract_draft
 from agent.prompt import build_request
@@ -77,7 +77,7 @@ def test_first_attempts_match_the_current_prompts(name):
     transcript = Transcript.load(domain.reference_transcript)
     ctx = build_context(domain, reference_observations(domain), toolbox_docs())
     frozen = {}
-    for function in dag.FUNCTIONS:
+    for function in FUNCTIONS:
         entries = [e for e in transcript.entries if e.function == function]
         assert entries, f"{name}: the transcript has no response for {function}"
         first = min(entries, key=lambda e: e.attempt)

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from agent.clients import Budget, ScriptedClient
-from agent.dag import authoring_order
+from contracts.functions import authoring_order
 from agent.errors import AuthoringExhausted, BudgetExceeded
 from agent.journal import Journal
 from agent.loop import AuthoringRun

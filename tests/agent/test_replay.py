@@ -7,7 +7,7 @@ import json
 import pytest
 
 from agent.clients import Author, RecordingClient, ReplayClient, ScriptedClient
-from agent.dag import authoring_order
+from contracts.functions import authoring_order
 from agent.errors import ReplayMismatch, TranscriptError
 from agent.journal import Journal
 from agent.loop import AuthoringRun

@@ -70,7 +70,7 @@ def test_unknown_function_is_a_usage_error(capsys):
 
 
 def test_package_exports_resolve():
-    import contracts.checks
+    import checks
 
-    for name in contracts.checks.__all__:
-        assert hasattr(contracts.checks, name), name
+    for name in checks.__all__:
+        assert hasattr(checks, name), name

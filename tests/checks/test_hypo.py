@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from hypothesis import strategies as st
 
-from contracts.checks._hypo import Failure, run_property
+from checks.hypo import Failure, run_property
 
 STRATEGY = st.tuples(st.integers(0, 9), st.integers(-50, 50))
 

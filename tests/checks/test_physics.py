@@ -1,4 +1,4 @@
-"""contracts.checks.physics: collisions, support and plan application on cubes (pure geometry)."""
+"""geometry.physics: collisions, support and plan application on cubes (pure geometry)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from contracts import se3
-from contracts.checks import physics as ph
+from geometry import physics as ph
 
 H = 0.02  # half edge [m]
 CUBE = np.array([[x, y, z] for x in (-H, H) for y in (-H, H) for z in (-H, H)])

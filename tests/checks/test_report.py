@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from contracts import validate
-from contracts.checks import CheckResult, build_report, comparable, report_markdown
-from contracts.checks.report import compact_poses, trim_traceback
+from checks import CheckResult, build_report, comparable, report_markdown
+from checks.report import compact_poses, trim_traceback
 from contracts.errors import ContractError
 
 

@@ -94,7 +94,7 @@ def test_a_session_answers_calls_in_order_with_their_errors(local_executor):
 
 
 def test_unsendable_inputs_are_the_callers_mistake(local_executor):
-    with pytest.raises(BadJob, match=r"inputs\.x"):
+    with pytest.raises(BadJob, match=r"arguments\.kwargs\.x"):
         run(local_executor, "def f(x):\n    return x\n", inputs={"x": object()})
 
 
