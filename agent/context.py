@@ -72,7 +72,7 @@ def mesh_summary(domain) -> str:
 
 def reference_observations(domain) -> list[tuple[str, dict]]:
     """Observations of the authoring reference (benchmark goal 1, start 1) from the front camera."""
-    from sim.render import observe
+    from sim.observation import observe
 
     path = domain.benchmark_path(1, 1)
     from domains.base import Instance

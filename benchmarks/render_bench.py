@@ -21,7 +21,8 @@ import numpy as np
 
 import domains
 import sim  # noqa: F401  (headless GL default before MuJoCo loads)
-from sim.render import DEFAULT_NOISE, apply_depth_noise, observe, renderer_for, write_observation
+from artifacts.observations import write_observation
+from sim.observation import DEFAULT_NOISE, apply_depth_noise, observe, renderer_for
 from sim.scene import scene_model
 
 RUNS = 10

@@ -14,7 +14,7 @@ N = 12
 def main() -> int:
     import domains
     from artifacts import ArtifactError, load
-    from sim.render import observe
+    from sim.observation import observe
 
     for name in domains.names():
         d = domains.load(name)

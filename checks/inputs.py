@@ -66,7 +66,7 @@ def camera(domain: Domain, name: str, scale: int = 1) -> dict:
 @lru_cache(maxsize=64)
 def _observation(domain_name: str, seed: int, side: str, cam: str, scale: int) -> dict[str, Any]:
     """The simulator's clean view (rgb, depth, mask) of an instance's scene."""
-    from sim.render import observe
+    from sim.observation import observe
 
     domain = domains.load(domain_name)
     inst = _instance(domain_name, seed)
@@ -77,7 +77,7 @@ def _observation(domain_name: str, seed: int, side: str, cam: str, scale: int) -
 
 def _noisy(view: Mapping[str, Any], seed: int) -> dict[str, Any]:
     """A clean view with the depth sensor's noise (seeded): what `perceive` gets."""
-    from sim.render import apply_depth_noise
+    from sim.observation import apply_depth_noise
 
     return {**view, "depth": apply_depth_noise(view["depth"], np.random.default_rng(seed))}
 

@@ -14,12 +14,10 @@ if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 from sim.errors import InvalidCameraError, InvalidSceneError, SimError
-from sim.render import (
+from sim.observation import (
     DepthNoise,
     contact_sheet,
     observe,
-    read_observation,
-    write_observation,
 )
 from sim.scene import build_spec, load_instance, parse_instance, parse_scene
 from sim.score import final_success, object_errors, state_accuracy
@@ -40,8 +38,6 @@ __all__ = [
     "observe",
     "parse_instance",
     "parse_scene",
-    "read_observation",
     "state_accuracy",
     "validate_scene",
-    "write_observation",
 ]

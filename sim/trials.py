@@ -23,7 +23,7 @@ from domains import Domain
 from domains.base import Instance
 from sim import robot
 from sim.executor import Executor, ExecutorConfig
-from sim.render import observe, renderer_for
+from sim.observation import observe, renderer_for
 from sim.scene import body_name, build_spec
 from sim.score import final_success, state_accuracy
 from sim.settle import check_order

@@ -19,7 +19,6 @@ from contracts.errors import UsageError
 from contracts.functions import CODE_DEPS, FUNCTIONS
 
 
-
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "check",

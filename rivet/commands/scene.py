@@ -40,7 +40,8 @@ def generate(args: argparse.Namespace) -> int:
 
 
 def render(args: argparse.Namespace) -> int:
-    from sim.render import DEFAULT_NOISE, observe, write_observation
+    from artifacts.observations import write_observation
+    from sim.observation import DEFAULT_NOISE, observe
 
     domain, inst = _checked(args.instance)
     noise = None if args.clean_depth else DEFAULT_NOISE
@@ -54,7 +55,7 @@ def render(args: argparse.Namespace) -> int:
 def show(args: argparse.Namespace) -> int:
     from PIL import Image
 
-    from sim.render import contact_sheet
+    from sim.observation import contact_sheet
 
     domain, inst = _checked(args.instance)
     title = f"{domain.name} {inst.name}".strip()

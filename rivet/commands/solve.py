@@ -18,8 +18,8 @@ from contracts.errors import RivetError
 def run(args: argparse.Namespace) -> int:
     import domains
     from artifacts import load
+    from artifacts.observations import read_observation
     from contracts import to_jsonable, validate
-    from sim.render import read_observation
 
     domain = domains.load(args.domain)
     start = read_observation(args.start)

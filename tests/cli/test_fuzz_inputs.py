@@ -28,7 +28,8 @@ FUZZ = settings(
 @pytest.fixture(scope="module")
 def observation(tmp_path_factory):
     import domains
-    from sim.render import observe, write_observation
+    from artifacts.observations import write_observation
+    from sim.observation import observe
 
     d = domains.load("cubes")
     inst = d.benchmark_instance(1, 1)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import domains
+from artifacts.observations import read_observation, write_observation
 from sim.errors import InvalidCameraError
-from sim.render import DepthNoise, apply_depth_noise, observe, read_observation, write_observation
+from sim.observation import DepthNoise, apply_depth_noise, observe
 
 
 @pytest.fixture(scope="module", params=domains.names())

@@ -9,9 +9,9 @@ import pytest
 from PIL import Image
 
 import domains
+from artifacts.observations import read_observation
 from domains._geometry import resting_height
 from rivet.cli import main
-from sim.render import read_observation
 
 
 def _hand_written(name: str) -> dict:

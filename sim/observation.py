@@ -14,18 +14,15 @@ Depth sensor model (`DepthNoise`, on by default), after a ZED 2i stereo camera a
   dropouts; everything nearer than 0.3 m or farther than 6 m.
 The noise is seeded, so an observation is reproducible.
 
-Folder format (DESIGN, BOP-style): `rgb.png` (8-bit RGB), `depth.png` (16-bit, millimetres ×
-1/`depth_scale`, i.e. depth [mm] = value × depth_scale, as in BOP), `camera.json` (the camera
-plus `depth_scale`; default 0.1, so 0.1 mm steps up to 6.5 m).
+The folder format (rgb.png, depth.png, camera.json) is `artifacts.observations`: the thin
+runtime reads it without this module's simulator.
 """
 
 from __future__ import annotations
 
-import json
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -34,12 +31,10 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from contracts import to_jsonable, validate
-from contracts.errors import ContractError, UsageError
+from contracts.errors import ContractError
 from domains import Domain
 from sim.errors import InvalidCameraError, SimError
 from sim.scene import RENDER_CAMERA, camera_quat, fovy_of, object_of_geom, scene_model
-
-DEPTH_SCALE = 0.1  # depth.png units: value × depth_scale = millimetres
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -226,57 +221,6 @@ def observe(
     return {**images, "camera": cam}
 
 
-# -- the folder format ----------------------------------------------------------------------
-
-
-def write_observation(
-    obs: Mapping, folder: str | Path, *, depth_scale: float = DEPTH_SCALE
-) -> Path:
-    """Write rgb.png, depth.png and camera.json into `folder` (created)."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    rgb = np.asarray(obs["rgb"], np.uint8)
-    depth_mm = np.asarray(obs["depth"], np.float64) * 1000.0
-    units = np.round(depth_mm / depth_scale)
-    units[(units < 0) | (units > 65535)] = 0
-    if not cv2.imwrite(str(folder / "rgb.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
-        raise SimError(f"cannot write {folder / 'rgb.png'}")
-    cv2.imwrite(str(folder / "depth.png"), units.astype(np.uint16))
-    cam = {**to_jsonable(dict(obs["camera"])), "depth_scale": depth_scale}
-    validate("observation", cam)
-    (folder / "camera.json").write_text(json.dumps(cam, indent=1) + "\n")
-    return folder
-
-
-def read_observation(folder: str | Path) -> dict[str, Any]:
-    """Read an observation folder: {"rgb", "depth" [m], "camera"}."""
-    folder = Path(folder)
-    for name in ("rgb.png", "depth.png", "camera.json"):
-        if not (folder / name).is_file():
-            raise UsageError(f"{folder}: not an observation folder (no {name})")
-    try:
-        cam = json.loads((folder / "camera.json").read_text())
-    except json.JSONDecodeError as e:
-        raise ContractError("", f"{folder / 'camera.json'}: not JSON ({e.msg})") from None
-    validate("observation", cam)
-    bgr = cv2.imread(str(folder / "rgb.png"), cv2.IMREAD_COLOR)
-    raw = cv2.imread(str(folder / "depth.png"), cv2.IMREAD_UNCHANGED)
-    if bgr is None or raw is None or raw.dtype != np.uint16:
-        raise UsageError(f"{folder}: rgb.png must be 8-bit colour and depth.png 16-bit")
-    if raw.shape != (cam["height"], cam["width"]) or bgr.shape[:2] != raw.shape:
-        raise UsageError(
-            f"{folder}: image sizes do not match camera.json ({cam['width']}×{cam['height']})"
-        )
-    depth = (raw.astype(np.float64) * cam["depth_scale"] / 1000.0).astype(np.float32)
-    camera = {
-        "width": cam["width"],
-        "height": cam["height"],
-        "K": np.asarray(cam["K"], float),
-        "T_world_camera": np.asarray(cam["T_world_camera"], float),
-    }
-    return {"rgb": cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), "depth": depth, "camera": camera}
-
-
 # -- contact sheets -------------------------------------------------------------------------
 
 
@@ -318,14 +262,11 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
 
 __all__ = [
     "DEFAULT_NOISE",
-    "DEPTH_SCALE",
     "DepthNoise",
     "Renderer",
     "apply_depth_noise",
     "check_camera",
     "contact_sheet",
     "observe",
-    "read_observation",
     "renderer_for",
-    "write_observation",
 ]
