@@ -20,7 +20,7 @@ from checks.budget import Budget
 from checks.calls import CallResult, DraftCalls
 from checks.report import CheckResult
 from contracts.functions import SIGNATURES
-from geometry.physics import Geometry, Workspace
+from geometry import Geometry, Workspace
 
 
 @dataclass(kw_only=True)
@@ -45,17 +45,11 @@ class DomainSpec:
             name=domain.name,
             catalogue={o.id: o.mesh for o in domain.objects},
             meshes=meshes,
-            geometry=Geometry(
-                {
-                    k: [np.asarray(p.vertices, float) for p in parts]
-                    for k, parts in domain.collision_meshes.items()
-                },
-                {k: np.asarray(m.center_mass, float) for k, m in meshes.items()},
-            ),
+            geometry=domain.shapes,
             symmetries={k: list(domain.symmetries(k)) for k in domain.mesh_specs},
             trans_tol=float(domain.tolerance.translation),
             rot_tol=None if domain.tolerance.rotation is None else float(domain.tolerance.rotation),
-            workspace=Workspace(x=tuple(ws.x), y=tuple(ws.y), reach=float(ws.reach)),
+            workspace=ws,
             relations=dict(domain.RELATIONS),
         )
 

@@ -7,9 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from domains._geometry import Body, ConvexPart, body_separation, place, yaw_pose
-from domains._planning import Region
 from domains.errors import GenerationError
+from geometry import Body, Piece, Workspace, body_separation, place, yaw_pose
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -23,7 +22,7 @@ def unit(*members: tuple[str, str, np.ndarray]) -> Unit:
     return Unit(members=tuple(members))
 
 
-def bodies(u: Unit, pose: np.ndarray, parts: Mapping[str, Sequence[ConvexPart]]) -> list[Body]:
+def bodies(u: Unit, pose: np.ndarray, parts: Mapping[str, Sequence[Piece]]) -> list[Body]:
     return [place(i, parts[m], pose @ rel) for i, m, rel in u.members]
 
 
@@ -31,7 +30,7 @@ def records(u: Unit, pose: np.ndarray) -> list[dict]:
     return [{"id": i, "mesh": m, "pose": pose @ rel} for i, m, rel in u.members]
 
 
-def fits(new: Sequence[Body], placed: Sequence[Body], region: Region, clearance: float) -> bool:
+def fits(new: Sequence[Body], placed: Sequence[Body], region: Workspace, clearance: float) -> bool:
     """Inside the region and at least `clearance` [m] from every placed body."""
     if not all(region.contains(b.xy()) for b in new):
         return False
@@ -41,13 +40,13 @@ def fits(new: Sequence[Body], placed: Sequence[Body], region: Region, clearance:
 def scatter(
     rng: np.random.Generator,
     units: Sequence[Unit],
-    parts: Mapping[str, Sequence[ConvexPart]],
-    region: Region,
+    parts: Mapping[str, Sequence[Piece]],
+    region: Workspace,
     *,
     placed: Sequence[Body] = (),
     clearance: float = 0.03,
     yaws: tuple[float, float] = (-np.pi, np.pi),
-    area: Region | None = None,
+    area: Workspace | None = None,
     tries: int = 300,
 ) -> list[dict]:
     """Place each unit at a random position and heading, clear of the others.

@@ -13,7 +13,7 @@ Rules the order obeys (they are what the executor's oracle needs):
 Greedy: place whatever can be placed, lowest first; otherwise move one blocking object
 aside. It is not optimal in the number of moves; it is deterministic.
 
-With a `GraspCheck` the order must also be executable by the robot: every move has a top-down
+With a `MoveCheck` the order must also be executable by the robot: every move has a top-down
 grasp of the 2F-85 that clears the neighbours at both ends. The geometric order is kept when
 it is; otherwise the planner plans again, grasp-aware: a move must have a grasp and must not
 take away the grasp of an object that still has to move (to pick it, or to put it on its
@@ -29,45 +29,27 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from domains._geometry import Body, ConvexPart, body_separation, place, resting_height, supports
 from domains.errors import GenerationError
+from geometry import Body, Piece, Workspace, body_separation, place, resting_height
+from geometry import resting_on as supports
 
 if TYPE_CHECKING:
-    from domains._grasping import GraspCheck
-
-
-@dataclass(frozen=True, kw_only=True)
-class Region:
-    """Where objects may be put down: an axis-aligned box in x, y and a disc about the base."""
-
-    x: tuple[float, float]  # [m]
-    y: tuple[float, float]  # [m]
-    reach: float  # largest horizontal distance from the robot base axis [m]
-
-    def contains(self, xy: np.ndarray) -> bool:
-        xy = np.asarray(xy, float).reshape(-1, 2)
-        return bool(
-            (xy[:, 0] >= self.x[0]).all()
-            and (xy[:, 0] <= self.x[1]).all()
-            and (xy[:, 1] >= self.y[0]).all()
-            and (xy[:, 1] <= self.y[1]).all()
-            and (np.linalg.norm(xy, axis=1) <= self.reach).all()
-        )
+    from geometry import MoveCheck
 
 
 @dataclass(frozen=True, kw_only=True)
 class Planner:
     """Plans construction orders for one domain's objects."""
 
-    parts: Mapping[str, Sequence[ConvexPart]]  # mesh key → convex parts
+    parts: Mapping[str, Sequence[Piece]]  # mesh key → convex parts
     symmetries: Mapping[str, np.ndarray]  # mesh key → (n, 4, 4)
-    region: Region  # where temporary places may be
+    region: Workspace  # where temporary places may be
     clearance: float = 0.03  # free gap around a temporary place, for the fingers [m]
     goal_clearance: float = 0.01  # gap between a temporary place and unbuilt goals [m]
     grid: float = 0.01  # spacing of candidate temporary places [m]
     touch: float = 5e-4  # penetration still counted as touching [m]
     loose_gap: float = 0.003  # least gap from an object not in its final place [m]
-    grasps: GraspCheck | None = None  # when set, every move must have a grasp
+    grasps: MoveCheck | None = None  # when set, every move must have a grasp
     temporary_checks: int = 60  # temporary places whose grasps are checked, nearest first
 
     def order(self, start: Sequence[Mapping], goal: Sequence[Mapping]) -> list[dict]:
@@ -247,7 +229,7 @@ class _RobotView:
     """The grasp-aware rules of one planning step (see the module docstring)."""
 
     def __init__(self, planner, mesh, state, target, goal_sup, sup, is_done) -> None:
-        self.grasps: GraspCheck = planner.grasps
+        self.grasps: MoveCheck = planner.grasps
         self.mesh, self.state, self.target = mesh, state, target
         self.goal_sup, self.is_done = goal_sup, is_done
         loaded = {s for i in state for s in sup[i]}

@@ -31,10 +31,9 @@ import numpy as np
 import trimesh
 
 from domains import _meshing, symmetry
-from domains._geometry import ConvexPart, bodies_of, contact_edges
-from domains._grasping import GraspCheck
-from domains._planning import Planner, Region
+from domains._planning import Planner
 from domains.errors import DomainError, GenerationError, UnknownObjectError
+from geometry import Geometry, MoveCheck, Piece, Workspace, bodies_of, contact_edges
 
 BENCHMARK_GOALS = 20
 BENCHMARK_STARTS = 3
@@ -184,9 +183,9 @@ class Domain:
     adjacent_gap: ClassVar[float | None] = 0.012  # [m]
     temp_clearance: ClassVar[float] = 0.03  # [m]
     # where objects may be (reachable by the FR3 top-down), checked on every mesh vertex
-    workspace: ClassVar[Region] = Region(x=(0.25, 0.75), y=(-0.35, 0.35), reach=0.78)
+    workspace: ClassVar[Workspace] = Workspace(x=(0.25, 0.75), y=(-0.35, 0.35), reach=0.78)
     # where generators and temporary places put objects (inside `workspace`)
-    placement: ClassVar[Region] = Region(x=(0.32, 0.68), y=(-0.27, 0.27), reach=0.72)
+    placement: ClassVar[Workspace] = Workspace(x=(0.32, 0.68), y=(-0.27, 0.27), reach=0.72)
     max_height: ClassVar[float] = 0.35  # highest allowed point of any object [m]
     # the domain properties its drafts are checked for, by function (`checks.properties`)
     properties: ClassVar[dict[str, list[tuple[str, dict[str, Any]]]]] = {}
@@ -276,12 +275,17 @@ class Domain:
         return {k: [_meshing.load(f) for f in m.collision] for k, m in self.mesh_specs.items()}
 
     @cached_property
-    def parts(self) -> dict[str, list[ConvexPart]]:
-        """Convex parts per mesh key, prepared for separation queries."""
-        return {
-            k: [ConvexPart.from_points(p.vertices) for p in ms]
-            for k, ms in self.collision_meshes.items()
-        }
+    def shapes(self) -> Geometry:
+        """The objects' shapes by mesh key (the collision parts): what the oracle geometry —
+        collisions, support, stability, plan checks, trial scoring — works with."""
+        return Geometry.from_parts(
+            {k: [p.vertices for p in ms] for k, ms in self.collision_meshes.items()}
+        )
+
+    @cached_property
+    def parts(self) -> dict[str, list[Piece]]:
+        """Convex pieces per mesh key (object frame), for separation queries."""
+        return {k: list(s._pieces) for k, s in self.shapes.items()}
 
     @cached_property
     def _symmetries(self) -> dict[str, np.ndarray]:
@@ -336,10 +340,10 @@ class Domain:
         )
 
     @cached_property
-    def grasps(self) -> GraspCheck:
+    def grasps(self) -> MoveCheck:
         """The robot's grasp predicate for moves of this domain's objects (needs the robot
         models: `MENAGERIE_ROOT`)."""
-        return GraspCheck(self._meshes, self._symmetries, self.parts)
+        return MoveCheck(self._meshes, self._symmetries, self.parts)
 
     @cached_property
     def robot_planner(self) -> Planner:

@@ -1,6 +1,89 @@
-"""The oracle geometry: what generators, settling, the plan checks, trial scoring and the
-executor's grasp model agree on — convex parts, interpenetration, support and stability.
+"""The oracle geometry: what generators, settling, the plan checks, trial scoring, the
+executor's grasp model and the programs' toolbox agree on.
 
-Pure numpy/scipy (no simulator, no I/O), so it runs on the host and inside the sandbox (the
-toolbox re-exports its documented names to programs).
+- `convex`: convex pieces and bodies, separating-axis distances, placement helpers;
+- `shape`: shapes as convex pieces (from collision parts or a mesh), mass, resting poses;
+- `contacts`: interpenetration, support, stability with loads, contact relations;
+- `plans`: applying a plan of transfers and judging every state (the one "plan success");
+- `hand`: the Robotiq 2F-85 on the FR3 — top-down grasps and whole moves;
+- `tolerances`: the one table of tolerances, each entry with the physical fact behind it.
+
+Pure numpy/scipy/trimesh (no simulator, no I/O), so it runs on the host and inside the
+sandbox, where `toolbox` re-exports its documented names to programs.
 """
+
+from geometry.contacts import (
+    TABLE,
+    Geometry,
+    UnknownShape,
+    collisions,
+    contact_edges,
+    resting_on,
+    scene_problems,
+    separation,
+    supports,
+    unstable_objects,
+)
+from geometry.convex import (
+    Body,
+    DegenerateError,
+    Piece,
+    bodies_of,
+    body_separation,
+    place,
+    resting_height,
+    yaw_of,
+    yaw_pose,
+)
+from geometry.hand import (
+    STROKE,
+    FingerModel,
+    Grasp,
+    GraspReport,
+    MoveCheck,
+    MoveVerdict,
+    Obstacle,
+    plan_grasps,
+)
+from geometry.plans import PlanOutcome, PlanProblem, Workspace, apply_plan
+from geometry.shape import RestingPose, Shape, stable_poses
+from geometry.tolerances import TOLERANCES, Tolerances
+
+__all__ = [
+    "STROKE",
+    "TABLE",
+    "TOLERANCES",
+    "Body",
+    "DegenerateError",
+    "FingerModel",
+    "Geometry",
+    "Grasp",
+    "GraspReport",
+    "MoveCheck",
+    "MoveVerdict",
+    "Obstacle",
+    "Piece",
+    "PlanOutcome",
+    "PlanProblem",
+    "RestingPose",
+    "Shape",
+    "Tolerances",
+    "UnknownShape",
+    "Workspace",
+    "apply_plan",
+    "bodies_of",
+    "body_separation",
+    "collisions",
+    "contact_edges",
+    "place",
+    "plan_grasps",
+    "resting_height",
+    "resting_on",
+    "scene_problems",
+    "separation",
+    "stable_poses",
+    "supports",
+    "unstable_objects",
+    "yaw_of",
+    "yaw_pose",
+]

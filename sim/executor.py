@@ -31,7 +31,7 @@ from contracts.errors import UsageError
 from sim import robot
 from sim._exec_errors import ExecutionError, FailureKind
 from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments
-from sim.grasp import Grasp, Obstacle, plan_grasps
+from geometry.hand import STROKE, Grasp, Obstacle, plan_grasps
 from sim.ik import ArmIK, IKSolution
 
 __all__ = [
@@ -570,7 +570,7 @@ class Executor:
     ) -> float:
         c = self.config
         bottom = float(_world_vertices(self.meshes[oid], T_pick)[:, 2].min())
-        hang = max(grasp.pick_tcp[2, 3] - bottom, robot.gripper_table().tip_at_gap(grasp.width))
+        hang = max(grasp.pick_tcp[2, 3] - bottom, STROKE.tip_at_gap(grasp.width))
         z = max([*tops, 0.0]) + hang + c.clearance
         return max(
             z, c.min_transfer_height, grasp.pick_tcp[2, 3] + 0.05, grasp.place_tcp[2, 3] + 0.05
@@ -580,8 +580,7 @@ class Executor:
         """Approach (rise, move above, descend, reach), then close, squeeze, lift: the last
         three segments are always close, squeeze, lift."""
         c = self.config
-        table = robot.gripper_table()
-        open_ctrl = table.ctrl_for_gap(grasp.open_gap)
+        open_ctrl = STROKE.ctrl_for_gap(grasp.open_gap)
         T_now = self.ik.fk(self._q_cmd)
         above = grasp.pick_tcp.copy()
         above[2, 3] = z
@@ -639,8 +638,7 @@ class Executor:
         """transfer, descend, final descent, pause, open, pause, retreat; the transfer turns the
         wrist the long way round with `long_way`."""
         c = self.config
-        table = robot.gripper_table()
-        open_ctrl = table.ctrl_for_gap(grasp.open_gap)
+        open_ctrl = STROKE.ctrl_for_gap(grasp.open_gap)
         release = place_tcp.copy()
         release[2, 3] += c.release_height
         above = release.copy()

@@ -1,8 +1,30 @@
-"""RGB-D observations of scenes, their sensor model, and the BOP-style folder format.
+"""RGB-D observations of scenes, their sensor model, camera files, and contact sheets.
 
 Rendering uses MuJoCo's offscreen OpenGL (set `MUJOCO_GL=egl` on headless machines). A
 camera is the DESIGN dict (OpenCV axes, K with square pixels and a centred principal point);
 the image is rendered through a movable MuJoCo camera placed at that pose.
+
+API (docs/observations.md has the details and the values):
+
+    observe(domain, scene, camera="front", *, seed=0, realism=None, calibration_seed=None,
+            noise=<the level's depth model>, mask=False) -> observation
+    observe_with_truth(...same arguments...) -> (observation, truth)
+    load_camera(path) -> camera dict          # a camera file; bad ones raise UsageErrors
+    parse_camera(value, where=...) -> camera dict
+
+- `camera`: a view name of the domain (front, view1, view2), a camera dict, or a camera
+  file path (`load_camera`).
+- `realism`: "clean" (None, the default), "default", "harsh" or a `sim.realism.Realism`.
+  "clean" is the protocol before realism existed, bit for bit.
+- the observation ``{"rgb", "depth", "camera"[, "mask"]}`` is what `perceive` gets: its
+  "camera" is the CALIBRATED camera (off by the level's calibration error), while the
+  image was rendered from the TRUE camera. ``truth`` (host-only: never give it to a policy)
+  is ``{"camera": true camera, "realism": level name, "exposure", "white_balance",
+  "calibration_error": (metres, radians)}``.
+- `calibration_seed` (default `seed`) draws the calibration error: one camera has one
+  calibration, so give a trial's start and goal the same calibration seed.
+- `noise`, when passed, replaces the level's depth model (None: the clean rendered depth);
+  ``observe(domain, scene, camera, noise=None, mask=True)`` is the clean view the checks use.
 
 Depth sensor model (`DepthNoise`, on by default), after a ZED 2i stereo camera at 720p:
 - metric depth along the optical axis, from the renderer's z-buffer;
@@ -12,7 +34,8 @@ Depth sensor model (`DepthNoise`, on by default), after a ZED 2i stereo camera a
 - missing pixels (depth 0): at depth discontinuities (a 3×3 neighbourhood spanning more than
   10 mm), dropped with probability 0.7, where stereo matching fails; 0.2 % random speckle
   dropouts; everything nearer than 0.3 m or farther than 6 m.
-The noise is seeded, so an observation is reproducible.
+The noise is seeded, so an observation is reproducible. The RGB sensor, lights and
+calibration models are `sim.realism`'s.
 
 The folder format (rgb.png, depth.png, camera.json) is `artifacts.observations`: the thin
 runtime reads it without this module's simulator.
@@ -20,59 +43,48 @@ runtime reads it without this module's simulator.
 
 from __future__ import annotations
 
+import json
+import math
+import os
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-import cv2
 import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from contracts import to_jsonable, validate
-from contracts.errors import ContractError
+from contracts.errors import ContractError, UsageError
 from domains import Domain
+from domains.base import CameraSpec
 from sim.errors import InvalidCameraError, SimError
-from sim.scene import RENDER_CAMERA, camera_quat, fovy_of, object_of_geom, scene_model
-
-
-@dataclass(frozen=True, kw_only=True)
-class DepthNoise:
-    """Stereo depth sensor model (see the module docstring); all lengths in metres."""
-
-    sigma_base: float = 0.0006  # [m]
-    sigma_quadratic: float = 0.0012  # [m] at 1 m, grows with z²
-    quantum: float = 0.001  # [m]
-    edge_jump: float = 0.01  # depth span in a 3×3 neighbourhood that marks an edge [m]
-    edge_dropout: float = 0.7  # probability an edge pixel is missing
-    speckle_dropout: float = 0.002  # probability any other pixel is missing
-    min_range: float = 0.3  # [m]
-    max_range: float = 6.0  # [m]
-
-    def sigma(self, z: np.ndarray) -> np.ndarray:
-        """Standard deviation [m] of the depth noise at depth `z` [m]."""
-        return self.sigma_base + self.sigma_quadratic * np.square(z)
-
-
-DEFAULT_NOISE = DepthNoise()
-
-
-def apply_depth_noise(
-    depth: np.ndarray, rng: np.random.Generator, model: DepthNoise = DEFAULT_NOISE
-) -> np.ndarray:
-    """Noisy float32 depth [m] from a clean one (0 = invalid stays invalid)."""
-    z = depth.astype(np.float32)
-    valid = (z >= model.min_range) & (z <= model.max_range)
-    noisy = z + rng.standard_normal(z.shape, dtype=np.float32) * model.sigma(z).astype(np.float32)
-    noisy = np.round(noisy / model.quantum) * model.quantum
-    kernel = np.ones((3, 3), np.uint8)
-    span = cv2.dilate(z, kernel) - cv2.erode(z, kernel)
-    edge = span > model.edge_jump
-    u = rng.random(z.shape, dtype=np.float32)
-    drop = (edge & (u < model.edge_dropout)) | (~edge & (u < model.speckle_dropout))
-    return np.where(valid & ~drop, noisy, 0.0).astype(np.float32)
-
+from sim.realism import (
+    DEFAULT_NOISE,
+    DepthNoise,
+    Realism,
+    apply_depth_noise,
+    calibrated_camera,
+    calibration_error,
+    draw_gains,
+    sensor_rgb,
+    streams,
+    vary_lighting,
+)
+from sim.realism import realism as realism_level
+from sim.scene import (
+    OFFSCREEN,
+    RENDER_CAMERA,
+    Lighting,
+    _pose,
+    camera_quat,
+    fovy_of,
+    lighting_of,
+    object_of_geom,
+    scene_model,
+    set_lighting,
+)
 
 # -- rendering ------------------------------------------------------------------------------
 
@@ -136,12 +148,33 @@ class Renderer:
         depth: bool = True,
         mask: bool = False,
         mask_ids: Sequence[str] | None = None,
+        lighting: Lighting | None = None,
     ) -> dict[str, np.ndarray]:
         """Render `data` from `camera`: {"rgb", "depth" (clean) [, "mask"]}.
 
         Args:
             mask_ids: object ids giving the mask's indices (mask = index, -1 background).
+            lighting: lights for this render only (`sim.scene.Lighting`); the model's own
+                lights are restored afterwards. None: the model's lights as they are.
         """
+        if lighting is None:
+            return self._render(data, camera, depth=depth, mask=mask, mask_ids=mask_ids)
+        saved = lighting_of(self.model)
+        set_lighting(self.model, data, lighting)
+        try:
+            return self._render(data, camera, depth=depth, mask=mask, mask_ids=mask_ids)
+        finally:
+            set_lighting(self.model, data, saved)
+
+    def _render(
+        self,
+        data: mujoco.MjData,
+        camera: Mapping,
+        *,
+        depth: bool,
+        mask: bool,
+        mask_ids: Sequence[str] | None,
+    ) -> dict[str, np.ndarray]:
         cam = check_camera(camera)
         self.model.cam_pos[self._cam] = cam["T_world_camera"][:3, 3]
         self.model.cam_quat[self._cam] = camera_quat(cam["T_world_camera"])
@@ -191,60 +224,278 @@ def renderer_for(model: mujoco.MjModel, width: int, height: int) -> Renderer:
     return r
 
 
-def observe(
+_DEPTH_OF_LEVEL: Any = object()  # `noise` not passed: the realism level's depth model
+
+
+def observe_with_truth(
     domain: Domain,
     scene: Mapping,
-    camera: str | Mapping = "front",
+    camera: str | Mapping | os.PathLike = "front",
     *,
-    noise: DepthNoise | None = DEFAULT_NOISE,
     seed: int = 0,
+    realism: str | Realism | None = None,
+    calibration_seed: int | None = None,
+    noise: DepthNoise | None = _DEPTH_OF_LEVEL,
     mask: bool = False,
-) -> dict[str, Any]:
-    """An observation of a parsed scene (objects only, no robot).
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """An observation of a parsed scene (objects only, no robot) and its host-only truth.
 
     Args:
-        camera: a camera name of the domain (front, view1, view2) or a camera dict.
-        noise: the depth sensor model; None gives the clean rendered depth.
-        seed: seeds the depth noise.
+        camera: a view name of the domain (front, view1, view2), a camera dict, or the path
+            of a camera file (`load_camera`). This is the TRUE camera: the image comes from it.
+        seed: seeds every random effect (depth noise exactly as before realism existed).
+        realism: "clean" (None), "default", "harsh" or a `sim.realism.Realism`.
+        calibration_seed: seeds the calibration error (default `seed`).
+        noise: replaces the level's depth model when passed; None gives the clean depth.
         mask: also return "mask": (H, W) int32, index of the visible object in
-            ``scene["objects"]``, -1 for background.
+            ``scene["objects"]``, -1 for background (from the true camera, like the image).
     Returns:
-        {"rgb": (H, W, 3) uint8, "depth": (H, W) float32 [m], "camera": camera dict[, "mask"]}
+        (observation, truth): observation ``{"rgb": (H, W, 3) uint8, "depth": (H, W) float32
+        [m], "camera": the CALIBRATED camera dict[, "mask"]}``, what `perceive` gets;
+        truth ``{"camera": the true camera, "realism": level name, "exposure": gain,
+        "white_balance": (3,) gains, "calibration_error": (metres, radians)}``, never for a
+        policy.
     """
-    cam = domain.camera(camera) if isinstance(camera, str) else check_camera(camera)
+    level = realism_level(realism)
+    depth_model = level.depth if noise is _DEPTH_OF_LEVEL else noise
+    if isinstance(camera, str) and camera in domain.cameras:
+        cam = domain.camera(camera)
+    elif isinstance(camera, os.PathLike) or (
+        isinstance(camera, str) and (camera.endswith(".json") or Path(camera).is_file())
+    ):
+        cam = load_camera(camera)
+    elif isinstance(camera, str):
+        cam = domain.camera(camera)  # refused, naming the known views
+    else:
+        cam = check_camera(camera)
+    rng = streams(seed, calibration_seed)
     sm = scene_model(domain, scene)
     r = renderer_for(sm.model, cam["width"], cam["height"])
     ids = [o["id"] for o in scene["objects"]]
-    images = r.render(sm.data, cam, mask=mask, mask_ids=ids)
-    if noise is not None:
-        images["depth"] = apply_depth_noise(images["depth"], np.random.default_rng(seed), noise)
-    return {**images, "camera": cam}
+    lighting = (
+        vary_lighting(lighting_of(sm.model), rng["lights"], level) if level.varies_lights else None
+    )
+    images = r.render(sm.data, cam, mask=mask, mask_ids=ids, lighting=lighting)
+    exposure, white_balance = draw_gains(rng["gains"], level)
+    if level.varies_rgb:
+        images["rgb"] = sensor_rgb(
+            images["rgb"], rng["pixels"], level, exposure=exposure, white_balance=white_balance
+        )
+    else:
+        exposure, white_balance = 1.0, np.ones(3)
+    if depth_model is not None:
+        images["depth"] = apply_depth_noise(images["depth"], rng["depth"], depth_model)
+    calibrated = calibrated_camera(cam, rng["calibration"], level)
+    truth = {
+        "camera": cam,
+        "realism": level.name,
+        "exposure": float(exposure),
+        "white_balance": np.asarray(white_balance, float),
+        "calibration_error": calibration_error(calibrated, cam),
+    }
+    return {**images, "camera": calibrated}, truth
+
+
+def observe(
+    domain: Domain,
+    scene: Mapping,
+    camera: str | Mapping | os.PathLike = "front",
+    *,
+    seed: int = 0,
+    realism: str | Realism | None = None,
+    calibration_seed: int | None = None,
+    noise: DepthNoise | None = _DEPTH_OF_LEVEL,
+    mask: bool = False,
+) -> dict[str, Any]:
+    """The observation `perceive` gets: ``observe_with_truth(...)[0]`` (same arguments).
+
+    Its "camera" is the calibrated camera; with the default ``realism=None`` ("clean") that
+    is the true camera and everything is as before realism existed:
+    ``observe(d, s, c, seed=k)`` has the stereo depth noise, ``noise=None`` the clean depth.
+    """
+    obs, _ = observe_with_truth(
+        domain,
+        scene,
+        camera,
+        seed=seed,
+        realism=realism,
+        calibration_seed=calibration_seed,
+        noise=noise,
+        mask=mask,
+    )
+    return obs
+
+
+# -- camera files ---------------------------------------------------------------------------
+
+
+class CameraFileError(InvalidCameraError):
+    """A camera file that cannot be used (exit code 2); the message names the file."""
+
+
+_VIEW_KEYS = {"width", "height", "fovy", "position", "target"}
+_CAMERA_KEYS = {"width", "height", "K", "T_world_camera"}
+
+
+def _number(value: Any, path: str, *, low: float, high: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ContractError(path, f"must be a finite number, got {value!r}")
+    if not low < value < high:
+        raise ContractError(path, f"must be in ({low:g}, {high:g}), got {value!r}")
+    return float(value)
+
+
+def _point(value: Any, path: str) -> tuple[float, float, float]:
+    if not isinstance(value, list) or len(value) != 3:
+        raise ContractError(path, "must be a list of 3 numbers [m]")
+    return tuple(  # type: ignore[return-value]
+        _number(v, f"{path}[{i}]", low=-100, high=100) for i, v in enumerate(value)
+    )
+
+
+def _size(value: Any, path: str, limit: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 2:
+        raise ContractError(path, f"must be an integer ≥ 2, got {value!r}")
+    if value > limit:
+        raise InvalidCameraError(f"camera.{path}: {value} exceeds the renderer's {limit} px")
+    return value
+
+
+def parse_camera(value: Any, *, where: str = "camera") -> dict:
+    """A camera dict from JSON: the DESIGN form ``{width, height, K, T_world_camera}`` (an
+    observation folder's camera.json, with its depth_scale, too) or a domain's cameras.json
+    entry ``{width, height, fovy [deg], position [m], target [m]}`` (OpenCV axes, x right,
+    image up towards +z).
+
+    Raises:
+        ContractError: malformed (names the field).
+        InvalidCameraError: a camera the MuJoCo renderer cannot reproduce (non-square pixels,
+            skew, a principal point off the image centre, bigger than the offscreen buffer, a
+            pose that is not a rigid motion, a view looking straight up or down).
+    """
+    if not isinstance(value, Mapping):
+        raise ContractError("", f"{where}: a camera must be a JSON object")
+    keys = set(value)
+    if "K" in keys or "T_world_camera" in keys:
+        body = {k: v for k, v in value.items() if k != "depth_scale"}
+        missing = _CAMERA_KEYS - set(body)
+        if missing:
+            raise ContractError("", f"a camera needs {', '.join(sorted(missing))}")
+        cam = check_camera(body)
+        _size(cam["width"], "width", OFFSCREEN[0])
+        _size(cam["height"], "height", OFFSCREEN[1])
+        cam["T_world_camera"] = _pose(value["T_world_camera"], "camera.T_world_camera")
+        if abs(np.linalg.det(cam["K"])) < 1e-9 or cam["K"][0, 0] <= 0:
+            raise InvalidCameraError("camera.K: the focal length must be positive")
+        if not np.allclose(cam["K"][2], (0, 0, 1)):
+            raise InvalidCameraError("camera.K: the last row must be [0, 0, 1]")
+        return cam
+    if keys >= _VIEW_KEYS:
+        extra = keys - _VIEW_KEYS - {"name"}
+        if extra:
+            raise ContractError(sorted(extra)[0], "unknown field of a camera view")
+        w = _size(value["width"], "width", OFFSCREEN[0])
+        h = _size(value["height"], "height", OFFSCREEN[1])
+        fovy = _number(value["fovy"], "fovy", low=0, high=180)
+        pos, target = _point(value["position"], "position"), _point(value["target"], "target")
+        forward = np.subtract(target, pos)
+        dist = np.linalg.norm(forward)
+        if dist < 1e-6:
+            raise InvalidCameraError("camera: position and target coincide")
+        if np.linalg.norm(np.cross(forward / dist, (0, 0, 1))) < 1e-3:
+            raise InvalidCameraError(
+                "camera: a view looking straight up or down has no defined image axes; "
+                "give the DESIGN form with T_world_camera"
+            )
+        spec = CameraSpec(name="file", width=w, height=h, fovy=fovy, position=pos, target=target)
+        return check_camera(spec.to_camera())
+    raise ContractError(
+        "",
+        "a camera file holds {width, height, K, T_world_camera} (the DESIGN camera) or "
+        "{width, height, fovy, position, target} (a cameras.json view)",
+    )
+
+
+def load_camera(path: str | os.PathLike) -> dict:
+    """The camera dict in a camera file (the forms of `parse_camera`).
+
+    Raises:
+        CameraFileError (a UsageError: exit code 2): no such file, not JSON, or any problem of
+            `parse_camera`; the message names the file and the problem.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise CameraFileError(f"{path}: no such camera file")
+    try:
+        value = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CameraFileError(f"{p}: not JSON ({getattr(e, 'msg', e)})") from None
+    try:
+        return parse_camera(value, where=str(p))
+    except UsageError as e:
+        raise CameraFileError(f"{p}: {e}") from None
 
 
 # -- contact sheets -------------------------------------------------------------------------
+
+
+CameraEntry = str | os.PathLike | Mapping | tuple[str, "str | os.PathLike | Mapping"]
+
+
+def _camera_entry(entry: CameraEntry) -> tuple[str, str | os.PathLike | Mapping]:
+    """(label, camera) of a contact sheet column."""
+    if isinstance(entry, tuple):
+        return entry[0], entry[1]
+    if isinstance(entry, os.PathLike) or (isinstance(entry, str) and entry.endswith(".json")):
+        return Path(entry).stem, Path(entry)
+    if isinstance(entry, str):
+        return entry, entry
+    return "camera", entry
 
 
 def contact_sheet(
     domain: Domain,
     scenes: Sequence[tuple[str, Mapping]],
     *,
-    cameras: Sequence[str] = ("front", "view1", "view2"),
+    cameras: Sequence[CameraEntry] = ("front", "view1", "view2"),
     tile_width: int = 640,
     title: str = "",
+    realism: str | Realism | Sequence[str | Realism] | None = None,
+    seed: int = 0,
+    crop: tuple[int, int, int, int] | None = None,
 ) -> np.ndarray:
-    """An RGB image: one row per (label, scene), one column per camera."""
+    """An RGB image: one row per (label, scene) and realism level, one column per camera.
+
+    Args:
+        cameras: view names, camera file paths, camera dicts, or (label, any of these).
+        realism: a level (None: clean) or a list of levels, each giving its own rows.
+        seed: the observations' seed (the same for every tile, so levels compare).
+        crop: (x, y, width, height) of the full-size image to show in each tile, e.g. a
+            `tile_width`-wide crop to see the sensor noise 1:1.
+    """
+    levels = list(realism) if isinstance(realism, list | tuple) else [realism]
+    columns = [_camera_entry(c) for c in cameras]
     tiles = []
     for label, scene in scenes:
-        row = []
-        for c in cameras:
-            rgb = observe(domain, scene, c, noise=None)["rgb"]
-            h = round(rgb.shape[0] * tile_width / rgb.shape[1])
-            img = Image.fromarray(rgb).resize((tile_width, h), Image.Resampling.LANCZOS)
-            ImageDraw.Draw(img).text(
-                (10, 8), f"{label} · {c}", fill=(255, 255, 255), font=_font(22)
-            )
-            row.append(np.asarray(img))
-        tiles.append(np.concatenate(row, axis=1))
+        for level in levels:
+            row = []
+            for name, c in columns:
+                rgb = observe(domain, scene, c, noise=None, realism=level, seed=seed)["rgb"]
+                if crop is not None:
+                    x, y, w, h = crop
+                    rgb = np.ascontiguousarray(rgb[y : y + h, x : x + w])
+                h = round(rgb.shape[0] * tile_width / rgb.shape[1])
+                img = Image.fromarray(rgb)
+                if img.width != tile_width:
+                    img = img.resize((tile_width, h), Image.Resampling.LANCZOS)
+                text = (
+                    f"{label} · {name}"
+                    if level is None
+                    else (f"{label} · {realism_level(level).name} · {name}")
+                )
+                ImageDraw.Draw(img).text((10, 8), text, fill=(255, 255, 255), font=_font(22))
+                row.append(np.asarray(img))
+            tiles.append(np.concatenate(row, axis=1))
     sheet = np.concatenate(tiles, axis=0)
     if title:
         band = Image.new("RGB", (sheet.shape[1], 44), (24, 24, 24))
@@ -262,11 +513,16 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
 
 __all__ = [
     "DEFAULT_NOISE",
+    "CameraFileError",
     "DepthNoise",
+    "Realism",
     "Renderer",
     "apply_depth_noise",
     "check_camera",
     "contact_sheet",
+    "load_camera",
     "observe",
+    "observe_with_truth",
+    "parse_camera",
     "renderer_for",
 ]

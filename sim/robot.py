@@ -1,7 +1,8 @@
 """The robot: a Franka Research 3 arm with a Robotiq 2F-85 gripper, from MuJoCo Menagerie.
 
 Design rule: every name and number the rest of `sim` needs about the robot lives here (joint,
-actuator, site and geom names, the park posture, the gripper's opening table), so the executor
+actuator, site and geom names, the park posture, the measurement of the gripper's stroke that
+`geometry.hand.STROKE` records), so the executor
 and the IK never spell a menagerie name themselves. The models are read through
 `mujoco_menagerie` (offline: `MENAGERIE_ROOT`); nothing is copied into this repository.
 
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from geometry.hand import GripperStroke
 from sim._exec_errors import RobotModelError
 
 PREFIX = "robot/"
@@ -231,34 +233,11 @@ def tcp_pose(data: mujoco.MjData, index: RobotIndex) -> np.ndarray:
     return T
 
 
-@dataclass(frozen=True, kw_only=True)
-class GripperTable:
-    """How the 2F-85's jaws move with its control, measured once in simulation.
-
-    The pads travel on an arc: closing moves them towards the fingertips' direction, so the
-    fingertip's depth along the TCP's z axis depends on the opening.
-    """
-
-    ctrl: np.ndarray  # (n,) increasing control values
-    gap: np.ndarray  # (n,) distance between the pads' inner faces [m], decreasing
-    tip: np.ndarray  # (n,) fingertip depth along the TCP z axis, from the TCP [m]
-
-    pad_height: float = 0.0375  # contact height of a pad, from its tip towards the palm [m]
-    pad_width: float = 0.022  # pad width across the closing direction [m]
-    max_gap: float = 0.085
-
-    def ctrl_for_gap(self, gap: float) -> float:
-        """Control value that opens the jaws to `gap` [m] (clipped to the stroke)."""
-        return float(np.interp(gap, self.gap[::-1], self.ctrl[::-1]))
-
-    def tip_at_gap(self, gap: float) -> float:
-        """Fingertip depth along the TCP z axis [m] when the jaws are `gap` [m] apart."""
-        return float(np.interp(gap, self.gap[::-1], self.tip[::-1]))
-
-
 @functools.cache
-def gripper_table() -> GripperTable:
-    """Measure the 2F-85's stroke: pad gap and fingertip depth over its control range."""
+def measure_stroke() -> GripperStroke:
+    """Measure the 2F-85's stroke in simulation: pad gap and fingertip depth over its control
+    range. `geometry.hand.STROKE` holds the numbers this gives (a test compares them), so
+    nothing else needs the simulator for the hand."""
     gripper = _load_spec("robotiq_2f85", "2f85")
     _absolute_meshdir(gripper)
     gripper.compiler.degree = False
@@ -280,4 +259,4 @@ def gripper_table() -> GripperTable:
         half_height = model.geom_size[pads[0], 2]
         gaps.append(abs(centres[1][1] - centres[0][1]) - 2 * half_thickness)
         tips.append(0.5 * (centres[0][2] + centres[1][2]) + half_height - TCP_OFFSET)
-    return GripperTable(ctrl=ctrls, gap=np.maximum(np.array(gaps), 0.0), tip=np.array(tips))
+    return GripperStroke(ctrl=ctrls, gap=np.maximum(np.array(gaps), 0.0), tip=np.array(tips))

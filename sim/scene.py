@@ -10,6 +10,12 @@ hidden). Inertia is exact: the catalogue mass spread over the watertight mesh.
 
 Scenes enter through `parse_scene`, which refuses malformed input with errors that name the
 path (ContractError) or the object (UnknownObjectError, InvalidSceneError).
+
+Lights: a directional key light (casting shadows) and a fill light, plus MuJoCo's headlight
+as ambient light (`LIGHTS`). They can be changed per render without rebuilding the model:
+`lighting_of(model)` reads them as a `Lighting`, `set_lighting(model, data, lighting)`
+writes one (`sim.realism.vary_lighting` draws varied ones; `sim.observation.Renderer.render`
+applies one for a single render and restores the previous lights afterwards).
 """
 
 from __future__ import annotations
@@ -168,7 +174,7 @@ def load_instance(path: str | Path) -> tuple[Domain, Instance]:
     return parse_instance(value)
 
 
-# -- building -------------------------------------------------------------------------------
+# -- poses ----------------------------------------------------------------------------------
 
 
 def _quat(rot: np.ndarray) -> np.ndarray:
@@ -188,6 +194,92 @@ def fovy_of(camera: Mapping) -> float:
     return float(np.degrees(2 * np.arctan((camera["height"] / 2) / k[1, 1])))
 
 
+# -- lights ---------------------------------------------------------------------------------
+
+# The scene's lights (world frame): directional, so `pos` only places the shadow map.
+LIGHTS = (
+    {
+        "name": "key",
+        "pos": (0.9, 0.5, 1.5),
+        "dir": (-0.3, -0.35, -1.0),
+        "diffuse": (0.5, 0.5, 0.5),
+        "specular": (0.2, 0.2, 0.2),
+        "castshadow": True,
+    },
+    {
+        "name": "fill",
+        "pos": (1.2, -0.6, 1.0),
+        "dir": (-0.6, 0.5, -0.8),
+        "diffuse": (0.25, 0.25, 0.25),
+        "specular": (0.0, 0.0, 0.0),
+        "castshadow": False,
+    },
+)
+HEADLIGHT = {"ambient": (0.3, 0.3, 0.3), "diffuse": (0.2, 0.2, 0.2), "specular": (0.05, 0.05, 0.05)}
+
+
+@dataclass(frozen=True, eq=False)
+class Lighting:
+    """The lights of a compiled model at one render.
+
+    Attributes:
+        pos, dir: (n, 3) position and direction of each model light (model order), in its
+            body's frame (the world for the scene's lights); `dir` need not be normalised.
+        diffuse, specular, ambient: (n, 3) colours of each light.
+        headlight: (3, 3) MuJoCo's headlight rows ambient, diffuse, specular (it lights the
+            scene from the camera; the scene uses its ambient part as room light).
+    """
+
+    pos: np.ndarray
+    dir: np.ndarray
+    diffuse: np.ndarray
+    specular: np.ndarray
+    ambient: np.ndarray
+    headlight: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.pos)
+
+
+def lighting_of(model: mujoco.MjModel) -> Lighting:
+    """A copy of the model's current lights."""
+    h = model.vis.headlight
+    return Lighting(
+        pos=model.light_pos.copy(),
+        dir=model.light_dir.copy(),
+        diffuse=model.light_diffuse.copy(),
+        specular=model.light_specular.copy(),
+        ambient=model.light_ambient.copy(),
+        headlight=np.array([h.ambient, h.diffuse, h.specular], dtype=np.float32),
+    )
+
+
+def set_lighting(model: mujoco.MjModel, data: mujoco.MjData, lighting: Lighting) -> None:
+    """Write `lighting` into the model (no recompilation) and update the lights' world poses.
+
+    Directions are normalised. The change lasts until the next call: a caller that varies the
+    lights for one render restores `lighting_of(model)` afterwards (`Renderer.render` does).
+    """
+    if lighting.n != model.nlight:
+        raise SimError(f"lighting has {lighting.n} lights, the model {model.nlight}")
+    d = np.asarray(lighting.dir, float)
+    norm = np.linalg.norm(d, axis=1, keepdims=True)
+    if not np.all(norm > 0):
+        raise SimError("lighting: a light direction is zero")
+    model.light_pos[:] = lighting.pos
+    model.light_dir[:] = np.where(np.isclose(norm, 1.0, rtol=0, atol=1e-12), d, d / norm)
+    model.light_diffuse[:] = lighting.diffuse
+    model.light_specular[:] = lighting.specular
+    model.light_ambient[:] = lighting.ambient
+    h = model.vis.headlight
+    h.ambient[:], h.diffuse[:], h.specular[:] = lighting.headlight
+    mujoco.mj_camlight(model, data)
+
+
+# -- building -------------------------------------------------------------------------------
+
+
 def build_spec(domain: Domain, scene: Mapping, *, with_robot: bool = False) -> mujoco.MjSpec:
     """The MuJoCo spec of a (parsed) scene: world, cameras and objects at their poses."""
     spec = mujoco.MjSpec()
@@ -199,9 +291,9 @@ def build_spec(domain: Domain, scene: Mapping, *, with_robot: bool = False) -> m
     spec.visual.quality.shadowsize = 2048
     spec.visual.map.znear = 0.01
     spec.visual.map.zfar = 20.0
-    spec.visual.headlight.ambient = [0.3, 0.3, 0.3]
-    spec.visual.headlight.diffuse = [0.2, 0.2, 0.2]
-    spec.visual.headlight.specular = [0.05, 0.05, 0.05]
+    spec.visual.headlight.ambient = list(HEADLIGHT["ambient"])
+    spec.visual.headlight.diffuse = list(HEADLIGHT["diffuse"])
+    spec.visual.headlight.specular = list(HEADLIGHT["specular"])
     spec.stat.extent = 1.0
     spec.stat.center = [0.4, 0.0, 0.1]
 
@@ -279,24 +371,16 @@ def _world(spec: mujoco.MjSpec) -> None:
                 contype=0,
                 conaffinity=0,
             )
-    wb.add_light(
-        name="key",
-        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
-        pos=[0.9, 0.5, 1.5],
-        dir=[-0.3, -0.35, -1.0],
-        diffuse=[0.5, 0.5, 0.5],
-        specular=[0.2, 0.2, 0.2],
-        castshadow=True,
-    )
-    wb.add_light(
-        name="fill",
-        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
-        pos=[1.2, -0.6, 1.0],
-        dir=[-0.6, 0.5, -0.8],
-        diffuse=[0.25, 0.25, 0.25],
-        specular=[0.0, 0.0, 0.0],
-        castshadow=False,
-    )
+    for light in LIGHTS:
+        wb.add_light(
+            name=light["name"],
+            type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+            pos=list(light["pos"]),
+            dir=list(light["dir"]),
+            diffuse=list(light["diffuse"]),
+            specular=list(light["specular"]),
+            castshadow=light["castshadow"],
+        )
 
 
 def _add_object(spec: mujoco.MjSpec, domain: Domain, o: Mapping) -> None:
@@ -421,18 +505,23 @@ def object_of_geom(model: mujoco.MjModel) -> dict[int, str]:
 
 
 __all__ = [
+    "HEADLIGHT",
+    "LIGHTS",
     "RENDER_CAMERA",
+    "Lighting",
     "SceneModel",
     "body_name",
     "build_spec",
     "camera_quat",
     "fovy_of",
     "joint_name",
+    "lighting_of",
     "load_instance",
     "object_of_geom",
     "parse_instance",
     "parse_scene",
     "scene_model",
+    "set_lighting",
 ]
 
 # UnknownObjectError is re-raised from parse_scene as is; keep the name importable here.

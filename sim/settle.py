@@ -3,10 +3,11 @@
 A scene is physically valid when
 - every object lies inside the domain's reachable workspace (every mesh vertex), no higher
   than `Domain.max_height`;
-- nothing penetrates the table or another object by more than `PENETRATION` (1 mm);
+- nothing penetrates the table or another object by more than the oracle's tolerance
+  (`geometry.TOLERANCES.penetration`, 1 mm);
 - it is settled: simulating it without the robot for `DURATION` (2 s), no point of any
   object moves more than `MOTION` (2 mm).
-The first two are pure geometry (exact convex-part separations); the last is MuJoCo.
+The first two are the oracle geometry (`geometry`); the last is MuJoCo.
 """
 
 from __future__ import annotations
@@ -18,11 +19,11 @@ import mujoco
 import numpy as np
 
 from domains import Domain
-from domains._geometry import bodies_of, body_separation, supports
+from geometry import TOLERANCES, bodies_of, body_separation
 from sim.errors import InvalidSceneError
 from sim.scene import scene_model
 
-PENETRATION = 0.001  # [m]
+PENETRATION = TOLERANCES.penetration  # [m]
 MOTION = 0.002  # [m]
 DURATION = 2.0  # [s]
 
@@ -148,41 +149,41 @@ def check_order(
 ) -> list[Problem]:
     """Problems of executing `steps` from `start` by teleporting one object per step.
 
-    Checks, at every step: the moved object has nothing resting on it; the state after the
-    move is physically valid (geometry, and settling when `physics`); and at the end every
-    object is at its goal pose within the domain's tolerance, modulo symmetry.
+    The abstract judge is `geometry.apply_plan` (the same as the plan checks'): at every step
+    the moved object has nothing resting on it and the state after the move is free of
+    interpenetration, supported and stable, inside the workspace; at the end every object is
+    at its goal pose within the domain's tolerance, modulo symmetry. With `physics`, every
+    state after a step must also settle in MuJoCo, and stay no higher than `max_height`.
     """
-    from sim.score import pose_within  # score imports settle; import late
+    from geometry import apply_plan
 
-    state = {r["id"]: dict(r) for r in start["objects"]}
-    out: list[Problem] = []
-    for k, step in enumerate(steps):
-        i = step["object"]
-        if i not in state:
-            return [Problem(object=i, problem=f"step {k}: not in the scene")]
-        records = list(state.values())
-        sup = supports(bodies_of(records, domain.parts))
-        loaded = [j for j, s in sup.items() if i in s]
-        if loaded:
-            out.append(
-                Problem(object=i, problem=f"step {k}: moved while {loaded[0]!r} rests on it")
-            )
-        state[i] = {**state[i], "pose": np.asarray(step["target_pose"], float)}
-        scene = {"domain": domain.name, "objects": list(state.values())}
-        found = geometric_problems(domain, scene)
+    tol = domain.tolerance
+    symmetries = {k: list(domain.symmetries(k)) for k in domain.mesh_specs}
+    outcome = apply_plan(
+        domain.shapes,
+        start["objects"],
+        steps,
+        goal["objects"],
+        trans_tol=tol.translation,
+        rot_tol=tol.rotation,
+        symmetries=symmetries,
+        workspace=domain.workspace,
+    )
+    if outcome.problem is not None:
+        p = outcome.problem
+        return [Problem(object=p.object, problem=p.message)]
+    for k, state in enumerate(outcome.states):
+        scene = {"domain": domain.name, "objects": state}
+        found = [q for q in geometric_problems(domain, scene) if "above" in q.problem]
         if not found and physics:
             found = physical_problems(domain, scene)
-        out += [
-            Problem(object=p.object, problem=f"after step {k} ({i}): {p.problem}") for p in found
-        ]
-        if out:
-            return out
-    for g in goal["objects"]:
-        if not pose_within(domain, state[g["id"]]["pose"], g["pose"], g["mesh"]):
-            out.append(
-                Problem(object=g["id"], problem="is not at its goal pose after the last step")
-            )
-    return out
+        if found:
+            moved = steps[k]["object"]
+            return [
+                Problem(object=q.object, problem=f"after step {k} ({moved}): {q.problem}")
+                for q in found
+            ]
+    return []
 
 
 __all__ = [

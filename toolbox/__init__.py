@@ -2,18 +2,11 @@
 
 vision and segmentation (cameras, point clouds, planes, colour/depth masks), polygons (2D
 shape fitting), registration (ICP, global registration, mesh pose from points), render
-(offscreen rendering with the OpenCV camera), contacts (collisions, support), stability
-(convex pieces, resting poses, loads), packing (footprints, gaps, finger room), geometry (SE(3)),
+(offscreen rendering with the OpenCV camera), stability (the judge's own geometry: convex
+pieces, collisions, support, resting poses, loads), packing (footprints, gaps, finger room), geometry (SE(3)),
 graphs (relation graphs), search (A*/BFS). `rivet toolbox docs` prints the prompt text.
 """
 
-from toolbox.contacts import (
-    poses_collide,
-    resting_pose,
-    support_relations,
-    unsupported_objects,
-    world_bounds,
-)
 from toolbox.errors import RendererUnavailableError, ToolboxError
 from toolbox.geometry import (
     PoseDistance,
@@ -147,7 +140,6 @@ __all__ = [
     "polygon_symmetry",
     "pose_distance",
     "pose_from_xyz_yaw",
-    "poses_collide",
     "project_points",
     "project_to_rotation",
     "register_mesh_to_points",
@@ -157,7 +149,6 @@ __all__ = [
     "removal_order",
     "remove_plane",
     "render_scene",
-    "resting_pose",
     "rgb_to_hsv",
     "rotation_about_axis",
     "rotation_angle_between",
@@ -168,12 +159,9 @@ __all__ = [
     "spread_footprints",
     "stable_poses",
     "state_key",
-    "support_relations",
     "supports",
     "transform_points",
     "unstable_objects",
-    "unsupported_objects",
     "voxel_downsample",
-    "world_bounds",
     "yaw_of",
 ]

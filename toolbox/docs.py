@@ -23,7 +23,6 @@ MODULES = (
     "polygons",
     "registration",
     "render",
-    "contacts",
     "stability",
     "packing",
     "graphs",

@@ -18,7 +18,7 @@ from checks.context import SuiteContext
 from checks.report import CheckResult
 from checks.suites._common import edge_multiset, scene_spec
 from contracts import se3
-from geometry.physics import apply_plan, body_separation, scene_problems, supports
+from geometry import body_separation, scene_problems, supports
 
 LIBRARY: dict[str, Callable[..., CheckResult]] = {}
 YAW_ONLY_TOL = np.radians(3.0)  # a turn about the vertical, within this tilt [rad]
@@ -277,9 +277,9 @@ def no_stacking(ctx: SuiteContext) -> CheckResult:
     for inst, s, g, steps in _plans(ctx):
         n += 1
         for k, oid, state in _states(s, steps):
-            sup = supports(ctx.spec.geometry.bodies(list(state.values())))
-            for who, how in sup.items():
-                others = [x for x in how.on if x != "table"]
+            sup = supports(list(state.values()), ctx.spec.geometry)
+            for who, on in sup.items():
+                others = [x for x in on if x != "table"]
                 if others:
                     return _plan_failure(
                         r, ctx, inst, s, g, steps, k,
@@ -349,9 +349,9 @@ def physically_valid(ctx: SuiteContext, penetration: float, contact: float) -> C
     n = 0
     for case, recs in _perceived(ctx):
         n += 1
-        known = [o for o in recs if o["mesh"] in ctx.spec.geometry.parts]
+        known = [o for o in recs if o["mesh"] in ctx.spec.geometry]
         problems = scene_problems(
-            ctx.spec.geometry, known, pen_tol=penetration, contact_tol=contact
+            known, ctx.spec.geometry, penetration=penetration, contact=contact
         )
         if problems:
             return r.fail(

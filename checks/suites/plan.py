@@ -4,7 +4,7 @@ explicit infeasibility.
 Instances come from the domain's instance generator; hypothesis varies them — both scenes
 moved together, or the goal made a translation of the start (every object must move, often
 onto another's spot) — and shrinks towards the first instance as generated. A plan is applied
-with `geometry.physics`: every step must pick a clear object and leave a collision-free,
+with `geometry.apply_plan` (what the trials score plans with too): every step must pick a clear object and leave a collision-free,
 supported state inside the workspace, and the last state must match the goal within the
 domain's tolerance. The states' relations come from the frozen `relate` when the draft has one
 (run by `checks.run` in a session of its own before the draft's: relations depend on the
@@ -20,7 +20,7 @@ from typing import Any
 from hypothesis import strategies as st
 
 from checks.hypo import Failure, run_property
-from geometry.physics import apply_plan
+from geometry import apply_plan
 from checks.report import CheckResult
 from checks.context import SuiteContext
 from checks.suites._common import (

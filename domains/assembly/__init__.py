@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 
 from domains import _layout
-from domains._geometry import place, yaw_pose
 from domains._layout import Unit
 from domains.assembly.dimensions import ARCH_H, BEAM, BLOCK, CYL_H, L_FOOT, PILLAR
 from domains.base import Domain
 from domains.errors import GenerationError
 from domains.registry import register
+from geometry import place, yaw_pose
 
 MESH = {
     "pillar_1": "pillar",

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 
 from domains import _layout
-from domains._geometry import bodies_of, place, supports, yaw_pose
 from domains._layout import Unit, unit
 from domains.base import Domain
 from domains.registry import register
+from geometry import bodies_of, place, yaw_pose
+from geometry import resting_on as supports
 
 SIDE = 0.04  # cube edge [m]
 PITCH = 0.046  # centre distance of neighbours in rows and pyramid bases: 6 mm gap [m]

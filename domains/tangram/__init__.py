@@ -10,12 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from domains import _layout
-from domains._geometry import place, yaw_pose
-from domains._planning import Region
 from domains.base import Domain
 from domains.errors import GenerationError
 from domains.registry import register
 from domains.tangram.figures import OBJECTS, UNIT
+from geometry import Workspace, place, yaw_pose
 
 # Benchmark goal k uses the k-th figure (goal 1, the reference, is the square); free draws
 # use any figure.
@@ -75,7 +74,7 @@ class Tangram(Domain):
         ids = [str(i) for i in rng.permutation(list(OBJECTS))]
         inside = int(rng.choice([0, 1, 2, 3], p=[0.3, 0.3, 0.25, 0.15]))
         xy = np.concatenate([place(r["id"], self.parts[r["mesh"]], r["pose"]).xy() for r in goal])
-        area = Region(
+        area = Workspace(
             x=(float(xy[:, 0].min()), float(xy[:, 0].max())),
             y=(float(xy[:, 1].min()), float(xy[:, 1].max())),
             reach=self.placement.reach,

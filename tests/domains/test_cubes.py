@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import domains
-from domains._geometry import bodies_of, supports
+from geometry import bodies_of
+from geometry import resting_on as supports
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import domains
-from domains._geometry import yaw_pose
+from geometry import yaw_pose
 from sim.settle import check_order
 
 # The cubes reference pyramid (goal 1) from a start where the geometric planner parks cyan

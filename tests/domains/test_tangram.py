@@ -86,7 +86,7 @@ def test_parallelogram_keeps_its_handedness(tangram):
 
 
 def test_some_starts_put_pieces_inside_the_goal_area(tangram):
-    from domains._geometry import bodies_of, body_separation
+    from geometry import bodies_of, body_separation
 
     count = 0
     for inst in tangram.benchmark():

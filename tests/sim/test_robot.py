@@ -113,8 +113,19 @@ def test_missing_robot_is_named():
         robot.RobotIndex.from_model(spec.compile())
 
 
-def test_gripper_table_spans_the_stroke():
-    table = robot.gripper_table()
+def test_the_hand_model_stroke_is_the_menagerie_grippers():
+    """geometry.hand.STROKE (what the executor, the checks and the programs use) is what the
+    menagerie 2F-85 does in simulation, to 0.05 mm."""
+    from geometry.hand import STROKE
+
+    measured = robot.measure_stroke()
+    np.testing.assert_allclose(STROKE.ctrl, measured.ctrl)
+    np.testing.assert_allclose(STROKE.gap, measured.gap, atol=5e-5)
+    np.testing.assert_allclose(STROKE.tip, measured.tip, atol=5e-5)
+
+
+def test_gripper_stroke_spans_the_stroke():
+    table = robot.measure_stroke()
     assert table.gap[0] == pytest.approx(0.085, abs=0.002)
     assert table.gap[-1] < 0.002
     assert np.all(np.diff(table.gap) < 0)

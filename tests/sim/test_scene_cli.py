@@ -10,7 +10,7 @@ from PIL import Image
 
 import domains
 from artifacts.observations import read_observation
-from domains._geometry import resting_height
+from geometry import resting_height
 from rivet.cli import main
 
 

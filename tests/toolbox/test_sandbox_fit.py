@@ -14,13 +14,13 @@ SCRIPT = textwrap.dedent(
     """
     import numpy as np, trimesh
     from tests.toolbox.conftest import top_down_camera
-    from toolbox import pose_from_xyz_yaw, poses_collide, register_mesh_to_segment, render_scene
+    from toolbox import Shape, collisions, pose_from_xyz_yaw, register_mesh_to_segment, render_scene
     cube = trimesh.creation.box((0.05, 0.05, 0.05))
     recs = [{"id": "a", "mesh": "cube", "pose": pose_from_xyz_yaw(0.01, 0, 0.025, 0.3)}]
     cam = top_down_camera(0.6)
     out = render_scene(recs, {"cube": cube}, cam)
     register_mesh_to_segment(cube, out["depth"], out["mask"] == 0, cam)
-    assert poses_collide(recs, {"cube": cube}) == []
+    assert collisions(recs, {"cube": Shape.from_mesh(cube)}) == []
     print("ok")
     """
 )

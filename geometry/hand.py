@@ -1,4 +1,6 @@
-"""Top-down parallel-jaw grasps for the 2F-85, from an object's mesh, its pose and its target.
+"""The robot's hand: top-down parallel-jaw grasps for the Robotiq 2F-85 on the FR3, from an
+object's mesh, its pose and its target — the one model the executor, the plan checks, the
+generators' construction planner and the programs (through `toolbox.hand`) all use.
 
 Design rule: a grasp is chosen once per transfer and held rigidly from pick to place, so it is
 planned in the object's frame and checked at both ends. Candidates come from pairs of
@@ -9,24 +11,74 @@ opened for the approach, clear the object itself, the table and every neighbour 
 and at the place. Reachability (the wrist's joint limits) is decided by the caller's IK.
 
 Gripper volumes are boxes in the TCP frame (z along the approach, y along the closing
-direction), measured from the menagerie 2F-85's collision geometry (see `FingerModel`).
+direction), measured from the menagerie 2F-85's collision geometry (see `FingerModel`); the
+jaws' stroke (`STROKE`) was measured in simulation from the same model, and
+`tests/sim/test_robot.py` measures it again and compares. No simulator is needed here.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import trimesh
 
 from contracts import se3
-from sim.robot import GripperTable, gripper_table
+from geometry.convex import Body, Piece, body_separation, place
+from geometry.tolerances import TOLERANCES
 
-VERTICAL_TOL = np.radians(3.0)  # a face counts as vertical within this tilt
-ANTIPARALLEL_TOL = np.radians(4.0)  # two faces count as opposite within this angle
-YAW_ONLY_TOL = np.radians(3.0)  # pick → place must be a rotation about the vertical
+VERTICAL_TOL = TOLERANCES.face_vertical
+ANTIPARALLEL_TOL = TOLERANCES.face_antiparallel
+YAW_ONLY_TOL = TOLERANCES.yaw_only
+
+
+@dataclass(frozen=True, kw_only=True)
+class GripperStroke:
+    """How the 2F-85's jaws move with its control: the pads travel on an arc, so the
+    fingertips' depth along the TCP's z axis depends on the opening.
+
+    Attributes:
+        ctrl: (n,) increasing control values (0 fully open … 255 fully closed).
+        gap: (n,) distance between the pads' inner faces [m], decreasing.
+        tip: (n,) fingertip depth along the TCP z axis, from the TCP [m].
+        pad_height: contact height of a pad, from its tip towards the palm [m].
+        pad_width: pad width across the closing direction [m].
+        max_gap: the widest opening [m].
+    """
+
+    ctrl: np.ndarray
+    gap: np.ndarray
+    tip: np.ndarray
+    pad_height: float = 0.0375
+    pad_width: float = 0.022
+    max_gap: float = 0.085
+
+    def ctrl_for_gap(self, gap: float) -> float:
+        """Control value that opens the jaws to `gap` [m] (clipped to the stroke)."""
+        return float(np.interp(gap, self.gap[::-1], self.ctrl[::-1]))
+
+    def tip_at_gap(self, gap: float) -> float:
+        """Fingertip depth along the TCP z axis [m] when the jaws are `gap` [m] apart."""
+        return float(np.interp(gap, self.gap[::-1], self.tip[::-1]))
+
+
+STROKE = GripperStroke(
+    ctrl=np.linspace(0.0, 255.0, 18),
+    gap=np.array(
+        [0.085166, 0.080818, 0.076317, 0.071674, 0.066897, 0.061996, 0.056981, 0.051862,
+         0.046649, 0.041353, 0.035984, 0.030554, 0.025073, 0.019552, 0.014003, 0.008437,
+         0.002864, 0.000423]
+    ),
+    tip=np.array(
+        [0.004525, 0.006193, 0.007764, 0.009231, 0.010592, 0.011844, 0.012983, 0.014006,
+         0.014912, 0.015698, 0.016361, 0.016901, 0.017315, 0.017602, 0.017763, 0.017794,
+         0.017698, 0.017626]
+    ),
+)  # fmt: skip
+"""The menagerie 2F-85's stroke, measured in simulation (`sim.robot.measure_stroke`)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -337,7 +389,7 @@ def _face_pairs(
     T_pick: np.ndarray,
     max_width: float,
     fingers: FingerModel,
-    table: GripperTable,
+    table: GripperStroke,
     rejected: dict[str, int],
 ) -> list[_FacePair]:
     R, t = T_pick[:3, :3], T_pick[:3, 3]
@@ -385,7 +437,7 @@ def _contact_patch(
     bottom: float,
     com: np.ndarray,
     fingers: FingerModel,
-    table: GripperTable,
+    table: GripperStroke,
 ) -> list[_FacePair]:
     """Where the pads may touch a face pair: the overlap of both faces seen along `n`, as low
     as the fingers may go (and, as an alternative, high on the faces), centred on the object's
@@ -486,7 +538,7 @@ def plan_grasps(
     fingers: FingerModel | None = None,
     table_z: float = 0.0,
     max_width: float = 0.080,
-    margins: Sequence[float] = (0.006, 0.002),
+    margins: Sequence[float] = TOLERANCES.grasp_margins,
     max_symmetries: int = 4,
     limit: int | None = None,
 ) -> GraspReport:
@@ -507,7 +559,7 @@ def plan_grasps(
             are then not necessarily the best). None: all.
     """
     fingers = fingers or FingerModel()
-    table = gripper_table()
+    table = STROKE
     T_pick = np.asarray(T_pick, dtype=float)
     T_target = np.asarray(T_target, dtype=float)
     syms = [np.eye(4)] if symmetries is None or len(symmetries) == 0 else list(symmetries)
@@ -684,3 +736,169 @@ def _score(
     off_com = float(np.linalg.norm(com[:2] - tcp_pick[:2, 3]))
     dyaw = abs(_wrap(_yaw_of(tcp_place[:3, :3]) - _yaw_of(tcp_pick[:3, :3])))
     return 1000.0 * margin + 2.0 * min(pair.contact_area / 4e-4, 1.0) - 1.0 * dyaw - 20.0 * off_com
+
+
+# -- whole moves ----------------------------------------------------------------------------
+
+NEAR = 0.2  # neighbours farther than this (horizontally) from the object cannot be hit [m]
+UP = np.array([0.0, 0.0, 1.0])  # the vertical sweep above a pick or a place [m]
+
+
+@dataclass(frozen=True, kw_only=True)
+class MoveVerdict:
+    """Whether the robot can make a move; if not, the neighbours in the way and why."""
+
+    ok: bool
+    blockers: tuple[str, ...] = ()  # most blocking first
+    reason: str = ""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Infeasible:
+    """The first step of an order that the robot cannot make."""
+
+    step: int
+    object: str
+    verdict: MoveVerdict
+
+    def __str__(self) -> str:
+        return f"step {self.step} ({self.object}): {self.verdict.reason}"
+
+
+class MoveCheck:
+    """Whether the robot can make single moves — a grasp that clears the neighbours at the pick
+    and at the place, and nothing above the object at either (it rises straight up and comes
+    straight down) — cached on the poses involved.
+
+    Args:
+        meshes: mesh key → mesh (object frame).
+        symmetries: mesh key → (n, 4, 4) object-frame symmetry transforms.
+        pieces: mesh key → convex pieces (object frame), for the vertical sweep.
+        margins: clearances tried between the gripper and the neighbours [m].
+    """
+
+    def __init__(
+        self,
+        meshes: Mapping[str, trimesh.Trimesh],
+        symmetries: Mapping[str, np.ndarray],
+        pieces: Mapping[str, Sequence[Piece]],
+        *,
+        margins: tuple[float, ...] = TOLERANCES.grasp_margins,
+    ) -> None:
+        self.meshes = meshes
+        self.symmetries = symmetries
+        self.parts = pieces
+        self.margins = margins
+        self._cache: dict[Any, MoveVerdict] = {}
+        self._xy: dict[str, np.ndarray] = {
+            k: np.asarray(m.vertices)[:, :2] for k, m in meshes.items()
+        }
+
+    def move(
+        self,
+        oid: str,
+        mesh: str,
+        T_from: np.ndarray,
+        T_to: np.ndarray,
+        others: Mapping[str, tuple[str, np.ndarray]],
+        place_others: Mapping[str, tuple[str, np.ndarray]] | None = None,
+    ) -> MoveVerdict:
+        """Can `oid` be moved from `T_from` to `T_to` with `others` ({id: (mesh, pose)})
+        around the pick and `place_others` (default: the same) around the place?"""
+        place_others = others if place_others is None else place_others
+        pick = self._near(T_from, mesh, others, oid)
+        place = self._near(T_to, mesh, place_others, oid)
+        key = (oid, mesh, _pose_key(T_from), _pose_key(T_to), pick, place)
+        if key not in self._cache:
+            self._cache[key] = self._plan(oid, mesh, T_from, T_to, others, place_others, key)
+        return self._cache[key]
+
+    def pickable(
+        self, oid: str, mesh: str, T: np.ndarray, others: Mapping[str, tuple[str, np.ndarray]]
+    ) -> MoveVerdict:
+        """Can `oid` be picked (and put back) where it is, among `others`?"""
+        return self.move(oid, mesh, T, T, others, others)
+
+    def first_infeasible(
+        self, start: Sequence[Mapping], steps: Sequence[Mapping]
+    ) -> Infeasible | None:
+        """The first step of `steps` from the records `start` the robot cannot make, or None."""
+        state = {r["id"]: (r["mesh"], np.asarray(r["pose"], float)) for r in start}
+        for k, step in enumerate(steps):
+            oid = step["object"]
+            mesh, pose = state[oid]
+            others = {j: v for j, v in state.items() if j != oid}
+            target = np.asarray(step["target_pose"], float)
+            verdict = self.move(oid, mesh, pose, target, others)
+            if not verdict.ok:
+                return Infeasible(step=k, object=oid, verdict=verdict)
+            state[oid] = (mesh, target)
+        return None
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _near(
+        self, T: np.ndarray, mesh: str, others: Mapping[str, tuple[str, np.ndarray]], oid: str
+    ) -> tuple:
+        """The neighbours that could be in the gripper's way (a cache key: ids and poses)."""
+        centre = self._xy[mesh] @ T[:2, :2].T + T[:2, 3]
+        lo, hi = centre.min(axis=0) - NEAR, centre.max(axis=0) + NEAR
+        out = []
+        for j in sorted(others):
+            if j == oid:
+                continue
+            m, pose = others[j]
+            xy = self._xy[m] @ pose[:2, :2].T + pose[:2, 3]
+            if np.all(xy.max(axis=0) >= lo) and np.all(xy.min(axis=0) <= hi):
+                out.append((j, m, _pose_key(pose)))
+        return tuple(out)
+
+    def _above(self, mesh: str, T: np.ndarray, near: tuple, pool: Mapping) -> list[str]:
+        """Neighbours in the vertical sweep of the object's convex parts above pose `T`."""
+        touch = TOLERANCES.sweep_touch
+        sweep = []
+        for p in place("", self.parts[mesh], T).pieces:
+            v = p.vertices
+            sweep.append(Piece.of(np.vstack([v, v + UP])))
+        swept = Body(id="", pieces=tuple(sweep))
+        out = []
+        for j, m, _ in near:
+            body = place(j, self.parts[m], pool[j][1])
+            if body_separation(swept, body, cutoff=touch)[0] < -touch:
+                out.append(j)
+        return out
+
+    def _plan(self, oid, mesh, T_from, T_to, others, place_others, key) -> MoveVerdict:
+        for where, T, near, pool in (
+            ("pick", T_from, key[4], others),
+            ("place", T_to, key[5], place_others),
+        ):
+            above = self._above(mesh, T, near, pool)
+            if above:
+                return MoveVerdict(
+                    ok=False,
+                    blockers=tuple(above),
+                    reason=f"{above[0]!r} is above the object at the {where}",
+                )
+
+        def obstacles(near, pool):
+            return [Obstacle(id=j, mesh=self.meshes[m], pose=pool[j][1]) for j, m, _ in near]
+
+        report = plan_grasps(
+            self.meshes[mesh],
+            T_from,
+            T_to,
+            symmetries=list(self.symmetries[mesh]),
+            pick_obstacles=obstacles(key[4], others),
+            place_obstacles=obstacles(key[5], place_others),
+            margins=self.margins,
+            limit=1,
+        )
+        if report.grasps:
+            return MoveVerdict(ok=True)
+        blockers = tuple(sorted(report.blockers, key=lambda j: -report.blockers[j]))
+        return MoveVerdict(ok=False, blockers=blockers, reason=f"no grasp: {report.summary()}")
+
+
+def _pose_key(T: np.ndarray) -> bytes:
+    return np.round(np.asarray(T, float)[:3], 7).tobytes()

@@ -1,4 +1,4 @@
-"""Top-down grasp selection (sim.grasp): geometry only, no physics."""
+"""Top-down grasp selection (geometry.hand): geometry only, no physics."""
 
 from __future__ import annotations
 
@@ -14,8 +14,7 @@ if _SHARED.is_dir():
     os.environ.setdefault("MENAGERIE_ROOT", str(_SHARED))
 
 from contracts import se3  # noqa: E402
-from sim.grasp import FingerModel, Obstacle, boxes_hit_triangles, plan_grasps  # noqa: E402
-from sim.robot import gripper_table  # noqa: E402
+from geometry.hand import STROKE, FingerModel, Obstacle, boxes_hit_triangles, plan_grasps  # noqa: E402
 
 CUBE = trimesh.creation.box((0.04, 0.04, 0.04))  # origin at the centre
 CUBE_SYMS = se3.cube_group()
@@ -120,7 +119,7 @@ def test_a_plate_is_gripped_by_its_knob_with_the_fingertips_above_the_plate():
     assert report.grasps
     for g in report.grasps:
         assert g.width == pytest.approx(0.015, abs=1e-6)
-        fingertips = g.pick_tcp[2, 3] - gripper_table().tip_at_gap(g.width)
+        fingertips = g.pick_tcp[2, 3] - STROKE.tip_at_gap(g.width)
         assert fingertips >= 0.015 + 0.002  # above the plate's top face
 
 
@@ -141,7 +140,7 @@ def test_a_tall_pillar_is_gripped_high_enough_to_clear_the_linkage():
     assert report.grasps
     fingers = FingerModel()
     for g in report.grasps:
-        tip = g.pick_tcp[2, 3] - gripper_table().tip_at_gap(g.width)
+        tip = g.pick_tcp[2, 3] - STROKE.tip_at_gap(g.width)
         assert tip + fingers.ceiling_at(g.open_gap) >= 0.08  # the top stays below the linkage
 
 
