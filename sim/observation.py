@@ -473,7 +473,9 @@ def contact_sheet(
         crop: (x, y, width, height) of the full-size image to show in each tile, e.g. a
             `tile_width`-wide crop to see the sensor noise 1:1.
     """
-    levels = list(realism) if isinstance(realism, list | tuple) else [realism]
+    levels: list[str | Realism | None] = (
+        list(realism) if isinstance(realism, list | tuple) else [realism]  # type: ignore[list-item]
+    )
     columns = [_camera_entry(c) for c in cameras]
     tiles = []
     for label, scene in scenes:

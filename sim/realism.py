@@ -7,10 +7,10 @@ the reasoning behind every value):
   the stereo depth model `DEFAULT_NOISE`, and a perfectly calibrated camera. Its images are
   bit-identical to ``observe(domain, scene, camera, noise=DEFAULT_NOISE, seed=s)``.
 - `default` — a ZED 2i (the front observation camera) in a normally lit lab: RGB shot and
-  read noise, auto-exposure and auto-white-balance drift, lights that differ by ±20 % and
+  read noise, auto-exposure and auto-white-balance drift, lights that differ by ±10 % and
   up to 10° between sessions, and an extrinsic calibration that is 2 mm / 0.2° off.
 - `harsh` — a dim lab, a badly calibrated or bumped camera: 4× the noise variance, ±0.5
-  stop exposure, ±10 % white balance, lights up to 30° and ±40 % off, a noisier depth
+  stop exposure, ±10 % white balance, lights up to 30° and ±25 % off, a noisier depth
   model, 5 mm / 0.5° calibration error.
 
 What is applied to one observation (all seeded, so the same seed gives the same image):
@@ -185,8 +185,8 @@ DEFAULT = Realism(
     exposure=0.2,
     white_balance=0.04,
     light_tilt=math.radians(10.0),
-    light_gain=0.2,
-    ambient_gain=0.2,
+    light_gain=0.1,
+    ambient_gain=0.1,
     depth=DEFAULT_NOISE,
     calib_translation=0.002,
     calib_rotation=math.radians(0.2),
@@ -198,8 +198,8 @@ HARSH = Realism(
     exposure=0.5,
     white_balance=0.10,
     light_tilt=math.radians(30.0),
-    light_gain=0.4,
-    ambient_gain=0.4,
+    light_gain=0.25,
+    ambient_gain=0.25,
     depth=HARSH_NOISE,
     calib_translation=0.005,
     calib_rotation=math.radians(0.5),
@@ -331,9 +331,9 @@ def sensor_rgb(
         exposure, white_balance: this observation's gains (`draw_gains`).
     """
     s = srgb_to_linear(rgb) * np.float32(exposure)
-    var = np.float32(level.read_noise**2)
+    var: np.ndarray = np.full(s.shape, level.read_noise**2, np.float32)
     if math.isfinite(level.full_scale_electrons):
-        var = var + np.maximum(s, 0.0) / np.float32(level.full_scale_electrons)
+        var += np.maximum(s, 0.0) / np.float32(level.full_scale_electrons)
     s = s + rng.standard_normal(s.shape, dtype=np.float32) * np.sqrt(var).astype(np.float32)
     s = np.clip(s, 0.0, 1.0)  # the sensor saturates
     if white_balance is not None:

@@ -197,7 +197,7 @@ def fovy_of(camera: Mapping) -> float:
 # -- lights ---------------------------------------------------------------------------------
 
 # The scene's lights (world frame): directional, so `pos` only places the shadow map.
-LIGHTS = (
+LIGHTS: tuple[dict[str, Any], ...] = (
     {
         "name": "key",
         "pos": (0.9, 0.5, 1.5),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,8 @@ import domains
 from artifacts.observations import read_observation
 from geometry import resting_height
 from rivet.cli import main
+
+DOCS_CAMERAS = Path(__file__).resolve().parents[2] / "docs" / "cameras"
 
 
 def _hand_written(name: str) -> dict:
@@ -108,3 +111,90 @@ def test_unknown_domain_for_generate(capsys, tmp_path):
         main(["scene", "generate", "cube", "--seed", "1", "--out", str(tmp_path / "x.json")]) == 2
     )
     assert "unknown domain 'cube'; known:" in capsys.readouterr().err
+
+
+def test_render_from_a_camera_file_with_realism_and_truth(tmp_path, capsys):
+    from sim.observation import load_camera
+    from sim.realism import calibration_error
+
+    out = tmp_path / "o"
+    argv = ["scene", "render", "cubes/goal01_start1", "--out", str(out)]
+    cam = str(DOCS_CAMERAS / "right_low.json")
+    assert main([*argv, "--camera", cam, "--realism", "default", "--with-truth"]) == 0
+    assert "calibration off by 2.0 mm / 0.20°" in capsys.readouterr().out
+    true_cam = load_camera(cam)
+    cals = []
+    for side in ("start", "goal"):
+        obs = read_observation(out / side)
+        assert obs["rgb"].shape == (540, 960, 3)
+        truth = load_camera(out / side / "true_camera.json")
+        assert np.allclose(truth["T_world_camera"], true_cam["T_world_camera"])
+        dt, dr = calibration_error(obs["camera"], truth)  # camera.json: the calibrated camera
+        assert np.isclose(dt, 0.002, atol=1e-6) and np.isclose(np.degrees(dr), 0.2, atol=1e-4)
+        cals.append(obs["camera"]["T_world_camera"])
+    assert np.allclose(cals[0], cals[1])  # one camera, calibrated once
+    # without --with-truth no true camera is written (and a stale one is removed)
+    assert main([*argv, "--view", "view1"]) == 0
+    for side in ("start", "goal"):
+        assert not (out / side / "true_camera.json").exists()
+        assert read_observation(out / side)["rgb"].shape == (720, 1280, 3)
+
+
+def test_render_defaults_to_the_clean_protocol(tmp_path):
+    from sim.observation import observe
+
+    assert (
+        main(["scene", "render", "tangram/goal01_start1", "--out", str(tmp_path), "--seed", "4"])
+        == 0
+    )
+    d = domains.load("tangram")
+    want = observe(d, d.benchmark()[0].start, "front", seed=4)
+    got = read_observation(tmp_path / "start")
+    assert np.array_equal(got["rgb"], want["rgb"])
+    assert np.allclose(got["camera"]["T_world_camera"], want["camera"]["T_world_camera"])
+
+
+def test_bad_cameras_are_refused(tmp_path, capsys):
+    argv = ["scene", "render", "cubes/goal01_start1", "--out", str(tmp_path / "o")]
+    good = json.loads((DOCS_CAMERAS / "right_low.json").read_text())
+
+    def refused(*extra) -> str:
+        assert main([*argv, *extra]) == 2
+        return capsys.readouterr().err
+
+    bad = tmp_path / "bad.json"
+    bad.write_text("{")
+    assert "bad.json: not JSON" in refused("--camera", str(bad))
+    off = json.loads(json.dumps(good))
+    off["K"][0][2] += 40
+    bad.write_text(json.dumps(off))
+    assert "principal point must be the image centre" in refused("--camera", str(bad))
+    skew = json.loads(json.dumps(good))
+    skew["K"][1][1] *= 1.02
+    bad.write_text(json.dumps(skew))
+    assert "square pixels" in refused("--camera", str(bad))
+    assert "no such camera file" in refused("--camera", str(tmp_path / "none.json"))
+    assert "neither a view of cubes" in refused("--camera", "top")
+    assert "not both" in refused(
+        "--view", "front", "--camera", str(DOCS_CAMERAS / "right_low.json")
+    )
+    with pytest.raises(SystemExit) as e:  # argparse choices
+        main([*argv, "--realism", "dirty"])
+    assert e.value.code == 2
+    assert not (tmp_path / "o").exists()
+
+
+def test_show_levels_and_camera_files(tmp_path):
+    sheet = tmp_path / "levels.png"
+    argv = ["scene", "show", "cubes/goal01_start1", "--out", str(sheet), "--side", "start"]
+    levels = ["--realism", "clean", "--realism", "harsh"]
+    cams = ["--camera", "front", "--camera", str(DOCS_CAMERAS / "left_high.json")]
+    assert main([*argv, *levels, *cams, "--tile-width", "320", "--colors", "128"]) == 0
+    with Image.open(sheet) as im:
+        assert im.size == (2 * 320, 44 + 2 * 180) and im.mode == "P"
+    assert (
+        main([*argv, "--camera", "front", "--crop", "400,200,300,150", "--tile-width", "300"]) == 0
+    )
+    with Image.open(sheet) as im:
+        assert im.size == (300, 44 + 150)
+    assert main([*argv, "--crop", "1200,700,300,150"]) == 2
