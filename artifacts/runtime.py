@@ -44,7 +44,7 @@ class System:
         return self._fn("relate")(records, self.meshes)
 
     def plan(self, start_state: dict, goal_state: dict) -> dict:
-        return self._fn("plan")(start_state, goal_state)
+        return self._fn("plan")(start_state, goal_state, self.meshes)
 
     @property
     def relations_vocabulary(self) -> dict[str, str]:

@@ -69,6 +69,7 @@ class SuiteContext:
     cases: Mapping[str, Any]
     budget: Budget
     draft: DraftCalls
+    hand: Any = None  # checks.robot.RobotView: the executor's hand and arm, for plan steps
     outputs: dict[str, Any] = field(default_factory=dict)
     cache: dict[Any, Any] = field(default_factory=dict)
 

@@ -14,6 +14,7 @@ Everything is seeded, so the same draft gets the same report (timings aside).
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -36,6 +37,7 @@ from checks.context import (
 )
 from checks.inputs import build_cases
 from checks.report import CheckResult, build_report
+from checks.robot import RobotView
 from checks.suites import perceive as perceive_suite
 from checks.suites import render as render_suite
 from checks.suites.plan import Unrelated
@@ -131,7 +133,14 @@ def _draft_checks(
         checks.append(check_signature(function, draft.signature()))
         if checks[-1].failing:
             return checks, None
-        ctx = SuiteContext(function=function, spec=spec, cases=cases, budget=budget, draft=draft)
+        ctx = SuiteContext(
+            function=function,
+            spec=spec,
+            cases=cases,
+            budget=budget,
+            draft=draft,
+            hand=robot_view(dom.name) if function == "plan" else None,
+        )
         checks += suites.SUITES[function](ctx)
         for prop in properties.properties_for(dom, function):
             checks.append(properties.run_property_check(prop, ctx))
@@ -143,6 +152,13 @@ def _draft_checks(
         check_fast_enough(function, draft, float(budget.online[function])),
     ]
     return checks, ctx
+
+
+@functools.lru_cache(maxsize=8)
+def robot_view(domain: str) -> RobotView:
+    """The executor's hand and arm for a domain's objects (shared: its caches pay off across
+    the drafts of an authoring run)."""
+    return RobotView(domains.load(domain))
 
 
 def _relate_states(

@@ -33,7 +33,7 @@ import trimesh
 from domains import _meshing, symmetry
 from domains._planning import Planner
 from domains.errors import DomainError, GenerationError, UnknownObjectError
-from geometry import Geometry, MoveCheck, Piece, Workspace, bodies_of, contact_edges
+from geometry import WORKSPACE, Geometry, MoveCheck, Piece, Workspace, bodies_of, contact_edges
 
 BENCHMARK_GOALS = 20
 BENCHMARK_STARTS = 3
@@ -183,7 +183,7 @@ class Domain:
     adjacent_gap: ClassVar[float | None] = 0.012  # [m]
     temp_clearance: ClassVar[float] = 0.03  # [m]
     # where objects may be (reachable by the FR3 top-down), checked on every mesh vertex
-    workspace: ClassVar[Workspace] = Workspace(x=(0.25, 0.75), y=(-0.35, 0.35), reach=0.78)
+    workspace: ClassVar[Workspace] = WORKSPACE
     # where generators and temporary places put objects (inside `workspace`)
     placement: ClassVar[Workspace] = Workspace(x=(0.32, 0.68), y=(-0.27, 0.27), reach=0.72)
     max_height: ClassVar[float] = 0.35  # highest allowed point of any object [m]

@@ -37,6 +37,7 @@ from geometry.convex import (
 )
 from geometry.hand import (
     STROKE,
+    WORKSPACE,
     FingerModel,
     Grasp,
     GraspReport,
@@ -53,6 +54,7 @@ __all__ = [
     "STROKE",
     "TABLE",
     "TOLERANCES",
+    "WORKSPACE",
     "Body",
     "DegenerateError",
     "FingerModel",

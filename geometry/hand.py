@@ -28,8 +28,12 @@ import trimesh
 
 from contracts import se3
 from geometry.convex import Body, Piece, body_separation, place
+from geometry.plans import Workspace
 from geometry.tolerances import TOLERANCES
 
+WORKSPACE = Workspace(x=(0.25, 0.75), y=(-0.35, 0.35), reach=0.78)
+"""Where the FR3 reaches top-down with the 2F-85: every point of an object it picks or places
+must lie inside (the plan checks refuse a step outside, and generators keep scenes inside)."""
 VERTICAL_TOL = TOLERANCES.face_vertical
 ANTIPARALLEL_TOL = TOLERANCES.face_antiparallel
 YAW_ONLY_TOL = TOLERANCES.yaw_only
@@ -746,11 +750,16 @@ UP = np.array([0.0, 0.0, 1.0])  # the vertical sweep above a pick or a place [m]
 
 @dataclass(frozen=True, kw_only=True)
 class MoveVerdict:
-    """Whether the robot can make a move; if not, the neighbours in the way and why."""
+    """Whether the robot can make a move; if not, the neighbours in the way and why.
+
+    Attributes:
+        grasps: feasible grasps found (at most the `limit` asked for; not ranked).
+    """
 
     ok: bool
     blockers: tuple[str, ...] = ()  # most blocking first
     reason: str = ""
+    grasps: tuple[Grasp, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -802,13 +811,16 @@ class MoveCheck:
         T_to: np.ndarray,
         others: Mapping[str, tuple[str, np.ndarray]],
         place_others: Mapping[str, tuple[str, np.ndarray]] | None = None,
+        *,
+        limit: int = 1,
     ) -> MoveVerdict:
         """Can `oid` be moved from `T_from` to `T_to` with `others` ({id: (mesh, pose)})
-        around the pick and `place_others` (default: the same) around the place?"""
+        around the pick and `place_others` (default: the same) around the place? Collects up
+        to `limit` feasible grasps (their reachability is the arm's IK, outside this model)."""
         place_others = others if place_others is None else place_others
         pick = self._near(T_from, mesh, others, oid)
         place = self._near(T_to, mesh, place_others, oid)
-        key = (oid, mesh, _pose_key(T_from), _pose_key(T_to), pick, place)
+        key = (oid, mesh, _pose_key(T_from), _pose_key(T_to), pick, place, limit)
         if key not in self._cache:
             self._cache[key] = self._plan(oid, mesh, T_from, T_to, others, place_others, key)
         return self._cache[key]
@@ -892,12 +904,16 @@ class MoveCheck:
             pick_obstacles=obstacles(key[4], others),
             place_obstacles=obstacles(key[5], place_others),
             margins=self.margins,
-            limit=1,
+            limit=key[6],
         )
         if report.grasps:
-            return MoveVerdict(ok=True)
+            return MoveVerdict(ok=True, grasps=report.grasps)
         blockers = tuple(sorted(report.blockers, key=lambda j: -report.blockers[j]))
-        return MoveVerdict(ok=False, blockers=blockers, reason=f"no grasp: {report.summary()}")
+        return MoveVerdict(
+            ok=False,
+            blockers=blockers,
+            reason=f"no top-down 2F-85 grasp clears the neighbours: {report.summary()}",
+        )
 
 
 def _pose_key(T: np.ndarray) -> bytes:

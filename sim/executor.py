@@ -32,7 +32,8 @@ from sim import robot
 from sim._exec_errors import ExecutionError, FailureKind
 from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments
 from geometry.hand import STROKE, Grasp, Obstacle, plan_grasps
-from sim.ik import ArmIK, IKSolution
+from sim.ik import ArmIK
+from sim.reach import Reach
 
 __all__ = [
     "ExecutionResult",
@@ -254,6 +255,7 @@ class Executor:
             for oid, b in self.bodies.items()
         }
         self.ik = ArmIK()
+        self.reach = Reach(self.ik)
         dt = model.opt.timestep
         self._substeps = max(1, round(self.config.control_dt / dt))
         self._tick_dt = self._substeps * dt
@@ -538,30 +540,16 @@ class Executor:
         return None
 
     def _rank_by_wrist(self, grasps: Sequence[Grasp]) -> tuple[list[Grasp], str]:
-        """Drop grasps whose pick or place pose has no IK solution; among equally good ones
-        prefer the wrist angle farthest from its limits (the 2F-85's half-turn symmetry gives
-        two wrist angles per grasp)."""
-        lo, hi = self.index.arm_range[6]
+        """Drop grasps whose pick or place pose has no IK solution (`sim.reach`, the test the
+        plan checks use too); among equally good ones prefer the wrist angle farthest from its
+        limits (the 2F-85's half-turn symmetry gives two wrist angles per grasp)."""
         ranked, reason = [], ""
-        solved: dict[bytes, IKSolution] = {}  # grasps share pick (or place) poses
         for g in grasps[: 2 * self.config.max_grasp_candidates]:
-            margins = []
-            for where, T in (("grasp", g.pick_tcp), ("place", g.place_tcp)):
-                key = np.round(T[:3], 5).tobytes()
-                if key not in solved:
-                    seed = robot.READY_QPOS.copy()
-                    seed[0] = np.arctan2(T[1, 3], T[0, 3])
-                    solved[key] = self.ik.solve(T, seed)
-                sol = solved[key]
-                if not sol.ok:
-                    reason = reason or (
-                        f"no IK solution at the {where} pose {np.round(T[:3, 3], 3).tolist()} "
-                        f"(off by {sol.position_error * 1000:.0f} mm)"
-                    )
-                    break
-                margins.append(min(sol.q[6] - lo, hi - sol.q[6]))
+            reached = self.reach.grasp(g, wrist=tuple(self.index.arm_range[6]))
+            if reached.ok:
+                ranked.append((round(g.score, 3), reached.wrist_margin, g))
             else:
-                ranked.append((round(g.score, 3), min(margins), g))
+                reason = reason or reached.reason
         ranked.sort(key=lambda r: (-r[0], -r[1]))
         return [r[2] for r in ranked], reason
 

@@ -3,7 +3,8 @@
 vision and segmentation (cameras, point clouds, planes, colour/depth masks), polygons (2D
 shape fitting), registration (ICP, global registration, mesh pose from points), render
 (offscreen rendering with the OpenCV camera), stability (the judge's own geometry: convex
-pieces, collisions, support, resting poses, loads), packing (footprints, gaps, finger room), geometry (SE(3)),
+pieces, collisions, support, resting poses, loads), robot (the executor's hand and reach: can
+a step be made), packing (footprints, gaps, finger room), geometry (SE(3)),
 graphs (relation graphs), search (A*/BFS). `rivet toolbox docs` prints the prompt text.
 """
 
@@ -54,6 +55,7 @@ from toolbox.registration import (
     register_mesh_to_segment,
 )
 from toolbox.render import compare_renders, overlay_mask, render_scene
+from toolbox.robot import MAX_OPENING, WORKSPACE, Grasp, GraspReport, Hand, MoveVerdict, Workspace
 from toolbox.search import SearchResult, astar, bfs, state_key
 from toolbox.segmentation import (
     Region,
@@ -89,6 +91,13 @@ from toolbox.vision import (
 )
 
 __all__ = [
+    "MAX_OPENING",
+    "WORKSPACE",
+    "Grasp",
+    "GraspReport",
+    "Hand",
+    "MoveVerdict",
+    "Workspace",
     "PolygonFit",
     "PoseDistance",
     "Rectangle",

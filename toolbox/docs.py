@@ -24,6 +24,7 @@ MODULES = (
     "registration",
     "render",
     "stability",
+    "robot",
     "packing",
     "graphs",
     "search",
@@ -65,9 +66,18 @@ def toolbox_docs(modules: Sequence[str] | None = None) -> str:
 
 
 def _entry(name: str, obj: object) -> str:
+    if not callable(obj):  # a constant: its value says it (the module text says what it is)
+        return f"### `{name} = {obj!r}`\n"
     doc = inspect.getdoc(obj) or ""
     if inspect.isclass(obj):
-        return f"### class `{name}`\n\n{doc}\n"
+        methods = [
+            f"#### `{name}.{m}{_signature(getattr(obj, m))}`\n\n{inspect.getdoc(getattr(obj, m))}\n"
+            for m, v in sorted(vars(obj).items())
+            if not m.startswith("_")
+            and (inspect.isfunction(v) or isinstance(v, staticmethod | classmethod))
+            and inspect.getdoc(getattr(obj, m))
+        ]
+        return "\n".join([f"### class `{name}`\n\n{doc}\n", *methods])
     return f"### `{name}{_signature(obj)}`\n\n{doc}\n"
 
 

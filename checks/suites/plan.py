@@ -34,6 +34,7 @@ from checks.suites._common import (
 )
 from contracts.errors import ContractError
 from contracts.validate import validate
+from sandbox import MESHES
 
 VARIANTS = ("as_generated", "both_moved", "goal_is_moved_start")
 
@@ -93,7 +94,7 @@ def plan_of(ctx: SuiteContext, x: tuple) -> tuple[Any, Any] | None:
         else:
             s, g, rs, rg, what = v
             start, goal = _state(ctx, s, rs), _state(ctx, g, rg)
-            ctx.cache[key] = (ctx.call(start, goal, label=what), v)
+            ctx.cache[key] = (ctx.call(start, goal, MESHES, label=what), v)
     return ctx.cache[key]
 
 
@@ -239,7 +240,9 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
             inst = instances[i]
             for side in ("start", "goal"):
                 recs, rel = inst[side], inst[f"{side}_relations"]
-                res = ctx.call(_state(ctx, recs, rel), _state(ctx, recs, rel), label="plan(s, s)")
+                res = ctx.call(
+                    _state(ctx, recs, rel), _state(ctx, recs, rel), MESHES, label="plan(s, s)"
+                )
                 ce = {"start": scene_spec(spec.name, recs), "goal": "the same scene"}
                 if not res.ok:
                     raise raised("plan(s, s)", res, ce)
@@ -264,6 +267,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
                 ctx.call(
                     _state(ctx, inst["start"], inst["start_relations"]),
                     _state(ctx, inst["goal"], inst["goal_relations"]),
+                    MESHES,
                     label=f"instance {inst['name']}",
                 )
                 for _ in range(2)
@@ -282,7 +286,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         for case in ctx.cases.get("infeasible", []):
             start = _state(ctx, case["start"], case["start_relations"])
             goal = _state(ctx, case["goal"], case["goal_relations"])
-            res = ctx.call(start, goal, label=f"infeasible case {case['name']}")
+            res = ctx.call(start, goal, MESHES, label=f"infeasible case {case['name']}")
             ce = _counterexample(ctx, case["start"], case["goal"])
             ce["why_no_plan_exists"] = case["why"]
             if not res.ok:
@@ -304,4 +308,43 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         r.examples = len(ctx.cases.get("infeasible", []))
 
     out.append(run_check("property.infeasible_explicit", "property", infeasible))
+
+    def room(r: CheckResult) -> None:
+        n_plans = n_steps = 0
+        for x in pool:
+            got = plan_of(ctx, x)
+            if got is None:
+                continue
+            res, (s, g, _, _, what) = got
+            if not res.ok or _schema_problem(ctx, res.value, {str(o["id"]) for o in s}):
+                continue
+            value = res.value
+            if value["status"] != "ok":
+                continue
+            n_plans += 1
+            problem = hand.first_problem(s, value["steps"])
+            n_steps += problem.checked
+            if problem.step is not None:
+                raise Failure(
+                    message=f"on {what}: step {problem.step} {problem.message}",
+                    expected="every step has a top-down 2F-85 grasp that clears the other objects "
+                    "at the pick (the state before the step) and at the place (after it), "
+                    "nothing above the object at either, and an arm pose (IK) at both",
+                    actual={"step": problem.step, "object": problem.object, "steps": value["steps"][
+                        : problem.step + 1
+                    ]},
+                    counterexample=_counterexample(ctx, s, g),
+                )
+        r.examples = n_plans
+        r.metrics = {"steps_checked": float(n_steps)}
+
+    hand = ctx.hand
+    out.append(
+        run_check(
+            "property.gripper_room",
+            "property",
+            room,
+            expected="every step executable by the robot's hand (see `toolbox.hand`)",
+        )
+    )
     return out

@@ -59,14 +59,14 @@ def test_interface_wrong_signature(check):
 
 def test_interface_import_error(check):
     report = check(
-        "plan", "import numpy as np\n\ndef plan(start_state, goal_state)\n    return 1\n"
+        "plan", "import numpy as np\n\ndef plan(start_state, goal_state, meshes)\n    return 1\n"
     )
     assert report["first_failure"] == "interface.import"
     assert "SyntaxError" in by_name(report, "interface.import")["message"]
 
 
 def test_interface_too_slow(check):
-    source = "def plan(start_state, goal_state):\n    while True:\n        pass\n"
+    source = "def plan(start_state, goal_state, meshes):\n    while True:\n        pass\n"
     report = check("plan", source)
     assert report["first_failure"] == "interface.returns_in_time"
     assert "did not return within 10 s" in by_name(report, "interface.returns_in_time")["message"]

@@ -73,14 +73,14 @@ def test_check_order_refuses_moving_a_loaded_object(cubes):
     goal = _scene(("red", _at(0.6, 0, 0.02)), ("blue", _at(0.5, 0, 0.02)))
     bad = [{"object": "red", "target_pose": _at(0.6, 0, 0.02)}]
     problems = check_order(cubes, start, bad, goal, physics=False)
-    assert "moved while 'blue' rests on it" in problems[0].problem
+    assert "picks 'red' while 'blue' rest(s) on it" in problems[0].problem
     good = [
         {"object": "blue", "target_pose": _at(0.4, 0.1, 0.02)},
         {"object": "red", "target_pose": _at(0.6, 0, 0.02)},
         {"object": "blue", "target_pose": _at(0.5, 0, 0.02)},
     ]
     assert check_order(cubes, start, good, goal) == []
-    assert "not at its goal" in check_order(cubes, start, good[:2], goal)[0].problem
+    assert "does not reach the goal" in check_order(cubes, start, good[:2], goal)[0].problem
 
 
 def test_planner_unstacks_a_wrong_order_stack(cubes):

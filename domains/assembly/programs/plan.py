@@ -1,7 +1,7 @@
 # Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
 # the assembly domain, the level a model's program should reach. It uses numpy and the
 # toolbox's exact polyhedral geometry (toolbox.stability).
-"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal structure.
+"""plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal structure.
 
 The parts' shapes come from the task's dimensions as convex pieces (the arch: two legs and
 sixteen slabs over its half-round opening; the L-block: foot and leg), so support, collision
@@ -595,7 +595,7 @@ def _temporary(world, i, pending, keep=(), poor_place=None):
     return None
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start_recs = {str(r["id"]): r for r in start_state["objects"]}
     goal_recs = {str(r["id"]): r for r in goal_state["objects"]}
     if sorted(start_recs) != sorted(goal_recs):

@@ -1,6 +1,6 @@
 # Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
 # the cubes domain, the level a model's program should reach. It uses only numpy.
-"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal.
+"""plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal.
 
 Greedy construction: every round, place a cube whose goal supporters are already final, whose
 goal column is free and which nothing rests on, lowest goal first; when none can be placed,
@@ -285,7 +285,7 @@ def _temporary(i, current, pending, grip=False, pickable=()):
     return None
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start = {str(r["id"]): _as_xyzy(r["pose"]) for r in start_state["objects"]}
     goal_raw = {str(r["id"]): r["pose"] for r in goal_state["objects"]}
     if sorted(start) != sorted(goal_raw):

@@ -1,7 +1,7 @@
 # Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
 # the tangram domain, the level a model's program should reach. It uses numpy and
 # toolbox.packing.
-"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal figure.
+"""plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal figure.
 
 Pieces lie flat and turn only about the vertical, so a pose is (x, y, yaw) and a piece is its
 outline (known per mesh key, with the catalogue's 0.25 mm clearance per edge) plus the 16 mm
@@ -236,7 +236,7 @@ def _targets(goal, current, done):
     return out
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start_recs = {str(r["id"]): r for r in start_state["objects"]}
     goal_recs = {str(r["id"]): r for r in goal_state["objects"]}
     if sorted(start_recs) != sorted(goal_recs):

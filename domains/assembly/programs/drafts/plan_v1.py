@@ -10,7 +10,7 @@
 # domains/assembly/programs/drafts/plan_v1.py --deps domains/assembly/programs` fails
 # `property.reaches_goal` (a collision after a step, or "infeasible" on a reachable goal);
 # on the 60 benchmark instances 13 of its plans fail.
-"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal structure.
+"""plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal structure.
 
 The parts' shapes come from the task's dimensions as convex pieces (the arch: two legs and
 sixteen slabs over its half-round opening; the L-block: foot and leg), so support, collision
@@ -365,7 +365,7 @@ def _temporary(world, i, pending):
     return None
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start_recs = {str(r["id"]): r for r in start_state["objects"]}
     goal_recs = {str(r["id"]): r for r in goal_state["objects"]}
     if sorted(start_recs) != sorted(goal_recs):

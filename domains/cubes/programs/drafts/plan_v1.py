@@ -3,14 +3,14 @@
 # spot is occupied, or the cube it needs is buried under a wrong-order stack, it just moves the
 # cube there anyway. `rivet check cubes plan domains/cubes/programs/drafts/plan_v1.py` fails
 # `property.reaches_goal` with the collision (or the pick from under a stack) it causes.
-"""plan(start_state, goal_state) -> plan: bottom-up, one move per cube."""
+"""plan(start_state, goal_state, meshes) -> plan: bottom-up, one move per cube."""
 
 import numpy as np
 
 SIDE = 0.04
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start = {r["id"]: np.asarray(r["pose"], float) for r in start_state["objects"]}
     goal = {r["id"]: np.asarray(r["pose"], float) for r in goal_state["objects"]}
     if sorted(start) != sorted(goal):

@@ -6,7 +6,7 @@
 # perceived, 0.5 mm apart, where a millimetre of perception error makes neighbours overlap.
 # `rivet check tangram plan domains/tangram/programs/drafts/plan_v1.py` fails
 # `property.reaches_goal` with the collision this causes.
-"""plan(start_state, goal_state) -> plan: one move per piece, in catalogue order."""
+"""plan(start_state, goal_state, meshes) -> plan: one move per piece, in catalogue order."""
 
 import numpy as np
 
@@ -18,7 +18,7 @@ def _yaw(T):
     return float(np.arctan2(T[1, 0], T[0, 0]))
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start = {r["id"]: np.asarray(r["pose"], float) for r in start_state["objects"]}
     goal = {r["id"]: (r["mesh"], np.asarray(r["pose"], float)) for r in goal_state["objects"]}
     if sorted(start) != sorted(goal):

@@ -1,0 +1,158 @@
+"""The robot's hand and reach: what the executor can do with one plan step, as it models it.
+
+This is the executor's own model (`geometry.hand`, re-exported): it picks its grasps with
+these functions, and the plan checks (`property.gripper_room`) refuse every step they reject.
+The robot is a Franka FR3 with a Robotiq 2F-85 parallel gripper. A step is one transfer: the
+gripper comes down vertically over the object, closes its jaws across two opposite vertical
+faces (at most 85 mm apart), lifts it straight up, carries it at a safe height, turns it only
+about the vertical, lowers it straight down onto the target and opens. So a step needs:
+
+- a grasp whose fingers, finger linkages, gripper base and the arm's wrist clear every other
+  object — at the pick, among the objects as they are before the step, and at the place,
+  among them as they are after it (the jaws open a few millimetres beyond the object on each
+  side; the fingertips stay 3 mm above what the object stands on);
+- nothing above the object at the pick or the place (it rises and descends vertically);
+- a target that differs from the current pose only by a turn about the vertical (modulo the
+  object's symmetry);
+- both ends inside `WORKSPACE`, every point of the object (the arm reaches them top-down).
+
+`Hand(meshes, symmetries).can_move(...)` answers all of this but the arm's joint limits (the
+checks add an IK test). Records are ``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from geometry import STROKE, WORKSPACE, GraspReport, MoveVerdict, Shape, Workspace
+from geometry.hand import Grasp, MoveCheck, Obstacle, plan_grasps
+from toolbox.errors import ToolboxError
+
+__all__ = [
+    "MAX_OPENING",
+    "WORKSPACE",
+    "Grasp",
+    "GraspReport",
+    "Hand",
+    "MoveVerdict",
+    "Workspace",
+]
+
+MAX_OPENING = STROKE.max_gap  # [m] widest the 2F-85's jaws open
+
+
+class Hand:
+    """The executor's grasp model for a set of meshes.
+
+    Args:
+        meshes: mesh key → `trimesh.Trimesh` in the object's canonical frame (what the
+            functions receive as `meshes`).
+        symmetries: mesh key → object-frame symmetry transforms (n, 4, 4) (e.g.
+            `toolbox.cube_symmetries()`); an object may then end at `target @ S` for any of
+            them, which gives the wrist more ways to place it. Default: none.
+
+    Results are cached on the poses involved: asking again about the same move is free.
+    """
+
+    def __init__(
+        self, meshes: Mapping[str, Any], symmetries: Mapping[str, Any] | None = None
+    ) -> None:
+        self.meshes = dict(meshes)
+        syms = dict(symmetries or {})
+        self.symmetries = {
+            k: np.asarray(syms.get(k, [np.eye(4)]), dtype=float).reshape(-1, 4, 4)
+            for k in self.meshes
+        }
+        try:
+            pieces = {k: Shape.from_mesh(m)._pieces for k, m in self.meshes.items()}
+        except Exception as e:
+            raise ToolboxError(f"Hand: a mesh is not a closed solid ({e})") from None
+        self._check = MoveCheck(self.meshes, self.symmetries, pieces)
+
+    def _others(self, records: Sequence[Mapping], skip: str) -> dict[str, tuple[str, np.ndarray]]:
+        out = {}
+        for r in records:
+            if str(r["id"]) == skip:
+                continue
+            if r["mesh"] not in self.meshes:
+                raise ToolboxError(f"unknown mesh {r['mesh']!r}; known: {sorted(self.meshes)}")
+            out[str(r["id"])] = (str(r["mesh"]), np.asarray(r["pose"], dtype=float))
+        return out
+
+    def can_move(
+        self,
+        records: Sequence[Mapping],
+        object_id: str,
+        target_pose: Any,
+        *,
+        place_records: Sequence[Mapping] | None = None,
+    ) -> MoveVerdict:
+        """Whether the robot can carry `object_id` from its pose in `records` to
+        `target_pose`: `.ok`, else `.reason` ("which finger hits what") and `.blockers` (the
+        objects in the way, most blocking first). The other objects are `records` at the pick
+        and `place_records` (default: the same) at the place."""
+        me = next((r for r in records if str(r["id"]) == str(object_id)), None)
+        if me is None:
+            raise ToolboxError(f"no record with id {object_id!r}")
+        T_from = np.asarray(me["pose"], dtype=float)
+        T_to = np.asarray(target_pose, dtype=float)
+        if T_from.shape != (4, 4) or T_to.shape != (4, 4):
+            raise ToolboxError("poses must be (4, 4) matrices")
+        pick = self._others(records, str(object_id))
+        place = pick if place_records is None else self._others(place_records, str(object_id))
+        return self._check.move(str(object_id), str(me["mesh"]), T_from, T_to, pick, place)
+
+    def can_pick(self, records: Sequence[Mapping], object_id: str) -> MoveVerdict:
+        """Whether the robot can pick `object_id` where it is (and put it back there)."""
+        me = next((r for r in records if str(r["id"]) == str(object_id)), None)
+        if me is None:
+            raise ToolboxError(f"no record with id {object_id!r}")
+        return self.can_move(records, object_id, me["pose"])
+
+    def first_infeasible(
+        self, records: Sequence[Mapping], steps: Sequence[Mapping]
+    ) -> tuple[int, MoveVerdict] | None:
+        """The first step of `steps` (``{"object", "target_pose"}``) from `records` the robot
+        cannot make, with why; None when it can make them all."""
+        state = [dict(r) for r in records]
+        for k, step in enumerate(steps):
+            verdict = self.can_move(state, str(step["object"]), step["target_pose"])
+            if not verdict.ok:
+                return k, verdict
+            state = [
+                dict(r, pose=np.asarray(step["target_pose"], float))
+                if str(r["id"]) == str(step["object"])
+                else r
+                for r in state
+            ]
+        return None
+
+    def grasps(
+        self,
+        records: Sequence[Mapping],
+        object_id: str,
+        target_pose: Any,
+        *,
+        limit: int | None = None,
+    ) -> GraspReport:
+        """Every feasible grasp for the move (best first; `limit` stops early), with counts
+        of why the others were refused."""
+        me = next((r for r in records if str(r["id"]) == str(object_id)), None)
+        if me is None:
+            raise ToolboxError(f"no record with id {object_id!r}")
+        obstacles = [
+            Obstacle(id=j, mesh=self.meshes[m], pose=T)
+            for j, (m, T) in self._others(records, str(object_id)).items()
+        ]
+        return plan_grasps(
+            self.meshes[me["mesh"]],
+            np.asarray(me["pose"], float),
+            np.asarray(target_pose, float),
+            symmetries=list(self.symmetries[me["mesh"]]),
+            pick_obstacles=obstacles,
+            place_obstacles=obstacles,
+            limit=limit,
+        )
