@@ -75,7 +75,7 @@ def reference_observations(domain) -> list[tuple[str, dict]]:
     from sim.observation import observe
 
     path = domain.benchmark_path(1, 1)
-    from domains.base import Instance
+    from domains.instance import Instance
 
     instance = Instance.from_dict(json.loads(path.read_text()))
     return [

@@ -50,7 +50,7 @@ class DomainSpec:
             trans_tol=float(domain.tolerance.translation),
             rot_tol=None if domain.tolerance.rotation is None else float(domain.tolerance.rotation),
             workspace=ws,
-            relations=dict(domain.RELATIONS),
+            relations=dict(domain.REFERENCE_RELATIONS),
         )
 
 

@@ -29,7 +29,7 @@ PROPERTY_RES = 4  # render's property checks at 1/4
 @lru_cache(maxsize=256)
 def _instance(domain_name: str, seed: int) -> domains.Instance | None:
     try:
-        return domains.load(domain_name).generate(seed, physics=False)
+        return domains.load(domain_name).generate(seed)
     except domains.GenerationError:
         return None
 
@@ -111,7 +111,7 @@ def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]
             {
                 "name": f"{inst.name}/{side}",
                 "records": scene_of(i, side),
-                "reference": domain.relate(scene_of(i, side)),
+                "reference": domain.reference_relations(scene_of(i, side)),
             }
             for i, inst in enumerate(pool)
             for side in ("start", "goal")
@@ -122,8 +122,8 @@ def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]
                 "name": inst.name,
                 "start": scene_of(i, "start"),
                 "goal": scene_of(i, "goal"),
-                "start_relations": domain.relate(scene_of(i, "start")),
-                "goal_relations": domain.relate(scene_of(i, "goal")),
+                "start_relations": domain.reference_relations(scene_of(i, "start")),
+                "goal_relations": domain.reference_relations(scene_of(i, "goal")),
                 "order_len": len(inst.order),
             }
             for i, inst in enumerate(pool)
@@ -212,7 +212,7 @@ def hardest_views(
     for i, inst in enumerate(pool):
         for side in ("start", "goal"):
             recs = records(inst.start if side == "start" else inst.goal)
-            graph = domain.relate(recs)
+            graph = domain.reference_relations(recs)
             supporters = {e["target"] for e in graph["edges"] if e["type"] == "on"}
             for cam in domain.cameras:
                 if (i, side, cam) in exclude:
@@ -247,8 +247,8 @@ def infeasible_cases(domain: Domain, inst: domains.Instance) -> list[dict[str, A
                 "name": f"{inst.name}/{name}",
                 "start": start,
                 "goal": g,
-                "start_relations": domain.relate(start),
-                "goal_relations": domain.relate(g),
+                "start_relations": domain.reference_relations(start),
+                "goal_relations": domain.reference_relations(g),
                 "why": why,
             }
         )

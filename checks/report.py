@@ -23,7 +23,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from contracts.functions import FUNCTIONS
 from contracts.validate import to_jsonable, validate
 from sandbox.harness.wire import clean_text
 

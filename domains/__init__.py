@@ -7,19 +7,12 @@ registers itself on import (dm_control style); the built-in ones are imported he
 from __future__ import annotations
 
 from domains import assembly, cubes, tangram  # noqa: F401  (register themselves)
-from domains.base import (
-    BENCHMARK_GOALS,
-    BENCHMARK_STARTS,
-    CameraSpec,
-    Domain,
-    Instance,
-    MeshSpec,
-    ObjectSpec,
-    Tolerance,
-    scene_from_json,
-    scene_to_json,
-)
+from domains.base import Domain
+from domains.benchmark import BENCHMARK_GOALS, BENCHMARK_STARTS
+from domains.catalogue import CameraSpec, MeshSpec, ObjectSpec, Tolerance
 from domains.errors import DomainError, GenerationError, UnknownDomainError, UnknownObjectError
+from domains.generation import PhysicsCheck, Problem, geometric_problems
+from domains.instance import Instance, scene_from_json, scene_to_json
 from domains.registry import load, names, register
 
 __all__ = [
@@ -31,10 +24,13 @@ __all__ = [
     "GenerationError",
     "Instance",
     "MeshSpec",
+    "PhysicsCheck",
+    "Problem",
     "ObjectSpec",
     "Tolerance",
     "UnknownDomainError",
     "UnknownObjectError",
+    "geometric_problems",
     "load",
     "names",
     "register",

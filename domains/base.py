@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any, ClassVar
@@ -31,142 +29,15 @@ import numpy as np
 import trimesh
 
 from domains import _meshing, symmetry
-from domains._planning import Planner
-from domains.errors import DomainError, GenerationError, UnknownObjectError
+from domains.benchmark import BENCHMARK_GOALS, BENCHMARK_STARTS, benchmark_name
+from domains.catalogue import CameraSpec, MeshSpec, ObjectSpec, Tolerance
+from domains.errors import DomainError, UnknownObjectError
+from domains.generation import PhysicsCheck, draw_instance
+from domains.instance import Instance
+from domains.reference_order import ReferencePlanner
 from geometry import WORKSPACE, Geometry, MoveCheck, Piece, Workspace, bodies_of, contact_edges
 
-BENCHMARK_GOALS = 20
-BENCHMARK_STARTS = 3
 CAMERA_NAMES = ("front", "view1", "view2")
-
-
-@dataclass(frozen=True, kw_only=True)
-class ObjectSpec:
-    """One object instance of the catalogue."""
-
-    id: str
-    mesh: str  # key into the domain's meshes
-    colour: tuple[float, float, float, float]  # RGBA in [0, 1]
-    mass: float  # [kg]
-    friction: float  # sliding friction coefficient
-
-
-@dataclass(frozen=True, kw_only=True)
-class MeshSpec:
-    """A mesh of the catalogue; `frame` says in words where its canonical frame is."""
-
-    key: str
-    file: Path  # watertight OBJ, metres, in the canonical frame
-    collision: tuple[Path, ...]  # convex parts whose union is the mesh
-    symmetry: Mapping[str, Any]  # see `domains.symmetry`
-    frame: str
-
-
-@dataclass(frozen=True, kw_only=True)
-class CameraSpec:
-    """A pinhole camera looking from `position` at `target` [m], square pixels, centred."""
-
-    name: str
-    width: int
-    height: int
-    fovy: float  # vertical field of view [deg]
-    position: tuple[float, float, float]
-    target: tuple[float, float, float]
-
-    def to_camera(self) -> dict:
-        """The camera in the DESIGN format: K (3, 3) and T_world_camera (4, 4), OpenCV axes."""
-        p, t = np.array(self.position, float), np.array(self.target, float)
-        forward = (t - p) / np.linalg.norm(t - p)
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        down = np.cross(forward, right)
-        pose = np.eye(4)
-        pose[:3, :3] = np.stack([right, down, forward], axis=1)
-        pose[:3, 3] = p
-        f = (self.height / 2) / np.tan(np.radians(self.fovy) / 2)
-        k = np.array(
-            [[f, 0.0, (self.width - 1) / 2], [0.0, f, (self.height - 1) / 2], [0.0, 0.0, 1.0]]
-        )
-        return {"width": self.width, "height": self.height, "K": k, "T_world_camera": pose}
-
-
-@dataclass(frozen=True, kw_only=True)
-class Tolerance:
-    """Scoring tolerance: an object is right when within both bounds, modulo symmetry."""
-
-    translation: float  # [m]
-    rotation: float | None  # [rad]; None: orientation is not scored (e.g. cubes)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Instance:
-    """A start scene, a goal scene and a construction order from one to the other."""
-
-    domain: str
-    name: str
-    seed: int | None
-    start: dict
-    goal: dict
-    order: tuple[dict, ...] = field(default=())  # plan steps {"object", "target_pose"}
-
-    def to_dict(self) -> dict:
-        """JSON-ready form (poses as nested lists)."""
-        return {
-            "domain": self.domain,
-            "name": self.name,
-            "seed": self.seed,
-            "start": scene_to_json(self.start),
-            "goal": scene_to_json(self.goal),
-            "order": {
-                "status": "ok",
-                "steps": [
-                    {"object": s["object"], "target_pose": _pose_json(s["target_pose"])}
-                    for s in self.order
-                ],
-            },
-        }
-
-    @staticmethod
-    def from_dict(value: Mapping[str, Any]) -> Instance:
-        """Read the JSON form; `order`, `name` and `seed` are optional."""
-        steps = (value.get("order") or {}).get("steps", [])
-        return Instance(
-            domain=value["domain"],
-            name=value.get("name", ""),
-            seed=value.get("seed"),
-            start=scene_from_json(value["start"]),
-            goal=scene_from_json(value["goal"]),
-            order=tuple(
-                {"object": s["object"], "target_pose": np.asarray(s["target_pose"], float)}
-                for s in steps
-            ),
-        )
-
-
-def _pose_json(pose: Any) -> list[list[float]]:
-    return [[round(float(v), 10) + 0.0 for v in row] for row in np.asarray(pose, float)]
-
-
-def scene_to_json(scene: Mapping[str, Any]) -> dict:
-    """A scene with poses as nested lists (rounded to 1e-10)."""
-    return {
-        "domain": scene["domain"],
-        "objects": [
-            {"id": o["id"], "mesh": o["mesh"], "pose": _pose_json(o["pose"])}
-            for o in scene["objects"]
-        ],
-    }
-
-
-def scene_from_json(scene: Mapping[str, Any]) -> dict:
-    """A scene with poses as (4, 4) float arrays (no validation: see `sim.scene.parse_scene`)."""
-    return {
-        "domain": scene["domain"],
-        "objects": [
-            {"id": o["id"], "mesh": o["mesh"], "pose": np.asarray(o["pose"], float)}
-            for o in scene["objects"]
-        ],
-    }
 
 
 class Domain:
@@ -174,8 +45,8 @@ class Domain:
 
     name: ClassVar[str]
     root: ClassVar[Path]
-    # the reference relation function's vocabulary and thresholds
-    RELATIONS: ClassVar[dict[str, str]] = {
+    # the reference relations' vocabulary and thresholds (the domain's judge, not `relate`)
+    REFERENCE_RELATIONS: ClassVar[dict[str, str]] = {
         "on": "the source rests on the target (touching from above)",
         "adjacent": "the two objects touch or nearly touch side by side (both directions)",
     }
@@ -304,17 +175,19 @@ class Domain:
 
     # -- reference relations -------------------------------------------------------------
 
-    def relate(self, records: Sequence[Mapping]) -> dict:
+    def reference_relations(self, records: Sequence[Mapping]) -> dict:
         """The reference relation graph of records (networkx node-link, directed multigraph).
 
-        Types are those of `RELATIONS`; computed from geometry with this domain's gaps.
+        Types are those of `REFERENCE_RELATIONS`; computed from geometry with this domain's
+        gaps. This is the domain's own judge of relations (state scoring), not the generated
+        `relate`.
         """
         g = nx.MultiDiGraph()
         for r in records:
             g.add_node(r["id"])
         bodies = bodies_of(records, self.parts)
         for a, b, kind in contact_edges(bodies, on_gap=self.on_gap, adjacent_gap=self.adjacent_gap):
-            if kind in self.RELATIONS:
+            if kind in self.REFERENCE_RELATIONS:
                 g.add_edge(a, b, type=kind)
         return nx.node_link_data(g, edges="edges")
 
@@ -330,9 +203,10 @@ class Domain:
         raise NotImplementedError
 
     @cached_property
-    def planner(self) -> Planner:
-        """The geometric construction planner (no grasp checks)."""
-        return Planner(
+    def reference_planner(self) -> ReferencePlanner:
+        """The reference construction planner (geometry only, no grasp checks): the order the
+        domain's instances carry, not the generated `plan`."""
+        return ReferencePlanner(
             parts=self.parts,
             symmetries=self._symmetries,
             region=self.placement,
@@ -341,14 +215,13 @@ class Domain:
 
     @cached_property
     def grasps(self) -> MoveCheck:
-        """The robot's grasp predicate for moves of this domain's objects (needs the robot
-        models: `MENAGERIE_ROOT`)."""
+        """The robot's grasp predicate for moves of this domain's objects (`geometry.hand`)."""
         return MoveCheck(self._meshes, self._symmetries, self.parts)
 
     @cached_property
-    def robot_planner(self) -> Planner:
-        """The construction planner whose orders the robot can execute."""
-        return dataclasses.replace(self.planner, grasps=self.grasps)
+    def robot_reference_planner(self) -> ReferencePlanner:
+        """The reference construction planner whose orders the robot can execute."""
+        return dataclasses.replace(self.reference_planner, grasps=self.grasps)
 
     def record(self, object_id: str, pose: np.ndarray) -> dict:
         return {
@@ -360,26 +233,31 @@ class Domain:
     def scene(self, records: Sequence[Mapping]) -> dict:
         return {"domain": self.name, "objects": [dict(r) for r in records]}
 
-    def generate(self, seed: int, *, physics: bool = True, grasps: bool | None = None) -> Instance:
+    def generate(
+        self, seed: int, *, physics: PhysicsCheck | None = None, grasps: bool | None = None
+    ) -> Instance:
         """A free draw: goal and start both from `seed`.
 
         Args:
-            physics: reject scenes that do not settle in MuJoCo.
-            grasps: make the order executable by the robot (every step has a grasp);
-                None: as `physics`. Both need MuJoCo; without them only geometry is checked.
+            physics: also reject scenes this says are not physically valid (e.g.
+                `sim.settle.physical_problems`: they do not settle in MuJoCo); None: geometry
+                only (workspace, height, interpenetration).
+            grasps: make the order executable by the robot (every step has a 2F-85 grasp,
+                `geometry.hand`); None: when `physics` is given.
         """
-        return self._instance(
+        return draw_instance(
+            self,
             name=f"seed{seed}",
             seed=seed,
             goal_key=(seed, 0),
             goal_index=None,
             start_key=(seed, 1),
             physics=physics,
-            grasps=physics if grasps is None else grasps,
+            grasps=physics is not None if grasps is None else grasps,
         )
 
     def benchmark_instance(
-        self, goal: int, start: int, *, physics: bool = True, grasps: bool | None = None
+        self, goal: int, start: int, *, physics: PhysicsCheck | None = None, grasps: bool | None = None
     ) -> Instance:
         """Benchmark instance `goal` (1–20, 1 = reference) × `start` (1–3), regenerated
         (`physics`, `grasps`: as for `generate`)."""
@@ -387,62 +265,16 @@ class Domain:
             raise ValueError(
                 f"benchmark has goals 1–{BENCHMARK_GOALS}, starts 1–{BENCHMARK_STARTS}"
             )
-        return self._instance(
+        return draw_instance(
+            self,
             name=benchmark_name(goal, start),
             seed=None,
             goal_key=(10_000, goal),
             goal_index=goal,
             start_key=(10_000, goal, start),
             physics=physics,
-            grasps=physics if grasps is None else grasps,
+            grasps=physics is not None if grasps is None else grasps,
         )
-
-    def _instance(
-        self, *, name, seed, goal_key, goal_index, start_key, physics, grasps
-    ) -> Instance:
-        planner = self.robot_planner if grasps else self.planner
-        problems: list[str] = []
-        for attempt in range(40):
-            goal = self.make_goal(np.random.default_rng([*goal_key, attempt]), goal_index)
-            goal_problems = self._problems(goal, physics)
-            if not goal_problems:
-                break
-            problems.append(f"goal draw {attempt}: {goal_problems[0]}")
-        else:
-            raise GenerationError(f"{self.name} {name}: no valid goal; " + "; ".join(problems[-3:]))
-        for attempt in range(40):
-            rng = np.random.default_rng([*start_key, attempt])
-            start = self.make_start(rng, goal)
-            start_problems = self._problems(start, physics)
-            if start_problems:
-                problems.append(f"start draw {attempt}: {start_problems[0]}")
-                continue
-            try:
-                order = planner.order(start, goal)
-            except GenerationError as e:
-                problems.append(f"start draw {attempt}: {e}")
-                continue
-            if not order:
-                problems.append(f"start draw {attempt}: start equals goal")
-                continue
-            return Instance(
-                domain=self.name,
-                name=name,
-                seed=seed,
-                start=self.scene(start),
-                goal=self.scene(goal),
-                order=tuple(order),
-            )
-        raise GenerationError(f"{self.name} {name}: no valid start; " + "; ".join(problems[-3:]))
-
-    def _problems(self, records: Sequence[Mapping], physics: bool) -> list[str]:
-        from sim.settle import geometric_problems, physical_problems  # sim builds on domains
-
-        scene = self.scene(records)
-        found = [str(p) for p in geometric_problems(self, scene)]
-        if not found and physics:
-            found = [str(p) for p in physical_problems(self, scene)]
-        return found
 
     @property
     def reference_transcript(self) -> Path:
@@ -461,7 +293,7 @@ class Domain:
         if len(paths) != BENCHMARK_GOALS * BENCHMARK_STARTS:
             raise DomainError(
                 f"{self.name}: benchmark has {len(paths)} files, expected "
-                f"{BENCHMARK_GOALS * BENCHMARK_STARTS}; run `python -m domains.benchmark {self.name}`"
+                f"{BENCHMARK_GOALS * BENCHMARK_STARTS}; run `rivet scene benchmark {self.name}`"
             )
         return [Instance.from_dict(json.loads(p.read_text())) for p in paths]
 
@@ -469,14 +301,3 @@ class Domain:
         return self.benchmark_dir / f"{benchmark_name(goal, start)}.json"
 
 
-def benchmark_name(goal: int, start: int) -> str:
-    return f"goal{goal:02d}_start{start}"
-
-
-_NAME = re.compile(r"^goal(\d\d)_start(\d)$")
-
-
-def parse_benchmark_name(name: str) -> tuple[int, int] | None:
-    """(goal, start) of a name like ``goal01_start2``, else None."""
-    m = _NAME.match(name)
-    return (int(m.group(1)), int(m.group(2))) if m else None

@@ -1,24 +1,26 @@
-"""Write or verify a domain's fixed benchmark set (20 goals × 3 starts).
-
-    python -m domains.benchmark cubes            # (re)write domains/cubes/benchmark/*.json
-    python -m domains.benchmark cubes --check    # exit 1 if regeneration differs
+"""A domain's fixed benchmark set (20 goals × 3 starts): names, the file format, regeneration.
 
 Generation is deterministic: goal g is drawn from the seed (10000, g), its starts from
-(10000, g, s); goal 1 is the domain's hand-authored reference.
+(10000, g, s); goal 1 is the domain's hand-authored reference. The files are written and
+verified with `rivet scene benchmark DOMAIN [--check]` (which settles every scene in MuJoCo).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
-import sys
-from collections.abc import Sequence
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-import domains
-from domains.base import BENCHMARK_GOALS, BENCHMARK_STARTS, Domain, Instance
+from domains.instance import Instance
+
+if TYPE_CHECKING:
+    from domains.base import Domain
+
+BENCHMARK_GOALS = 20
+BENCHMARK_STARTS = 3
 
 _NUMBERS = re.compile(r"\[\s*(-?[\d.e+-]+(?:,\s*-?[\d.e+-]+)*)\s*\]")
 
@@ -32,9 +34,23 @@ def dumps(value: dict) -> str:
     return text + "\n"
 
 
-def regenerate(domain: Domain) -> list[Instance]:
+def benchmark_name(goal: int, start: int) -> str:
+    return f"goal{goal:02d}_start{start}"
+
+
+_NAME = re.compile(r"^goal(\d\d)_start(\d)$")
+
+
+def parse_benchmark_name(name: str) -> tuple[int, int] | None:
+    """(goal, start) of a name like ``goal01_start2``, else None."""
+    m = _NAME.match(name)
+    return (int(m.group(1)), int(m.group(2))) if m else None
+
+
+def regenerate(domain: Domain, physics: Callable[[Any, dict], list] | None) -> list[Instance]:
+    """Every benchmark instance drawn again (`physics`: see `Domain.generate`)."""
     return [
-        domain.benchmark_instance(g, s)
+        domain.benchmark_instance(g, s, physics=physics, grasps=True)
         for g in range(1, BENCHMARK_GOALS + 1)
         for s in range(1, BENCHMARK_STARTS + 1)
     ]
@@ -51,30 +67,3 @@ def same(a: dict, b: dict, atol: float = 1e-7) -> bool:
     if isinstance(a, float):
         return bool(np.isclose(a, b, rtol=0, atol=atol))
     return a == b
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("domain", choices=domains.names())
-    parser.add_argument("--check", action="store_true", help="compare instead of writing")
-    args = parser.parse_args(argv)
-    domain = domains.load(args.domain)
-    domain.benchmark_dir.mkdir(exist_ok=True)
-    differ = []
-    for inst in regenerate(domain):
-        path = domain.benchmark_dir / f"{inst.name}.json"
-        value = inst.to_dict()
-        if args.check:
-            if not path.exists() or not same(json.loads(path.read_text()), value):
-                differ.append(inst.name)
-        else:
-            path.write_text(dumps(value))
-            print(f"{path}: {len(inst.order)} steps")
-    if differ:
-        print(f"{args.domain}: regenerated instances differ: {', '.join(differ)}", file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

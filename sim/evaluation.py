@@ -86,7 +86,7 @@ def _init_worker(config: EvalConfig) -> None:
 
 
 def _run_one(instance_json: dict) -> dict:
-    from domains.base import Instance
+    from domains.instance import Instance
     from sim.trials import run_trial
 
     cfg: EvalConfig = _WORKER["config"]

@@ -58,7 +58,7 @@ from PIL import Image, ImageDraw, ImageFont
 from contracts import to_jsonable, validate
 from contracts.errors import ContractError, UsageError
 from domains import Domain
-from domains.base import CameraSpec
+from domains.catalogue import CameraSpec
 from sim.errors import InvalidCameraError, SimError
 from sim.realism import (
     DEFAULT_NOISE,

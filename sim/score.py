@@ -162,8 +162,8 @@ def state_accuracy(domain: Domain, perceived: Any, truth: Any) -> StateScore:
     valid_est = [r for r in est if r["id"] in ids and r["mesh"] == domain.object(r["id"]).mesh]
     if len(valid_est) != len(est):
         extra += sorted({r["id"] for r in est if r not in valid_est and r["id"] in ids})
-    g_true = _edges(domain.relate(true))
-    g_est = _edges(domain.relate(valid_est)) if valid_est else set()
+    g_true = _edges(domain.reference_relations(true))
+    g_est = _edges(domain.reference_relations(valid_est)) if valid_est else set()
     rel_ok = g_true == g_est
     correct = not missing and not extra and rel_ok and all(e.within for e in errors)
     return StateScore(

@@ -19,26 +19,14 @@ import mujoco
 import numpy as np
 
 from domains import Domain
-from geometry import TOLERANCES, bodies_of, body_separation
+from domains.generation import Problem, geometric_problems
+from geometry import TOLERANCES
 from sim.errors import InvalidSceneError
 from sim.scene import scene_model
 
 PENETRATION = TOLERANCES.penetration  # [m]
 MOTION = 0.002  # [m]
 DURATION = 2.0  # [s]
-
-
-@dataclass(frozen=True, kw_only=True)
-class Problem:
-    """Something physically wrong with one object (or with the scene when `object` is None)."""
-
-    object: str | None
-    problem: str
-
-    def __str__(self) -> str:
-        return (
-            f"object {self.object!r}: {self.problem}" if self.object is not None else self.problem
-        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,45 +40,6 @@ class SettleResult:
     @property
     def settled(self) -> bool:
         return all(m <= MOTION for m in self.motion.values())
-
-
-def geometric_problems(domain: Domain, scene: Mapping) -> list[Problem]:
-    """Workspace, table and interpenetration problems of a parsed scene (no simulation)."""
-    out: list[Problem] = []
-    bodies = bodies_of(scene["objects"], domain.parts)
-    ws = domain.workspace
-    for b in bodies:
-        xy = b.xy()
-        if not ws.contains(xy):
-            far = xy[np.argmax(np.linalg.norm(xy - [np.mean(ws.x), 0], axis=1))]
-            out.append(
-                Problem(
-                    object=b.id,
-                    problem=(
-                        f"outside the reachable workspace (a point at x={far[0]:.3f}, y={far[1]:.3f} m; "
-                        f"allowed x∈[{ws.x[0]}, {ws.x[1]}], y∈[{ws.y[0]}, {ws.y[1]}], "
-                        f"within {ws.reach} m of the base)"
-                    ),
-                )
-            )
-        if b.lowest < -PENETRATION:
-            out.append(
-                Problem(object=b.id, problem=f"penetrates the table by {-b.lowest * 1000:.1f} mm")
-            )
-        if b.highest > domain.max_height:
-            out.append(
-                Problem(
-                    object=b.id, problem=f"reaches z={b.highest:.3f} m, above {domain.max_height} m"
-                )
-            )
-    for i, a in enumerate(bodies):
-        for b in bodies[i + 1 :]:
-            gap, _ = body_separation(a, b, cutoff=0.0)
-            if gap < -PENETRATION:
-                out.append(
-                    Problem(object=a.id, problem=f"penetrates {b.id!r} by {-gap * 1000:.1f} mm")
-                )
-    return out
 
 
 def settle(domain: Domain, scene: Mapping, *, duration: float = DURATION) -> SettleResult:

@@ -20,7 +20,7 @@ import numpy as np
 
 from contracts import ContractError, to_jsonable, validate
 from domains import Domain
-from domains.base import Instance
+from domains.instance import Instance
 from sim import robot
 from sim.executor import Executor, ExecutorConfig
 from sim.observation import observe, renderer_for

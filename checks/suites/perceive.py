@@ -16,12 +16,11 @@ from typing import Any
 import numpy as np
 
 from checks import images
-from contracts import se3
+from checks.context import SuiteContext
 from checks.hypo import Failure
 from checks.report import CheckResult
-from checks.context import SuiteContext
-from checks.suites._common import copy_records, raised, run_check, same_value
-from checks.suites._common import scene_spec
+from checks.suites._common import copy_records, raised, run_check, same_value, scene_spec
+from contracts import se3
 from contracts.errors import ContractError
 from contracts.validate import validate
 from sandbox import MESHES

@@ -19,10 +19,9 @@ from typing import Any
 
 from hypothesis import strategies as st
 
-from checks.hypo import Failure, run_property
-from geometry import apply_plan
-from checks.report import CheckResult
 from checks.context import SuiteContext
+from checks.hypo import Failure, run_property
+from checks.report import CheckResult
 from checks.suites._common import (
     copy_records,
     first_difference,
@@ -34,6 +33,7 @@ from checks.suites._common import (
 )
 from contracts.errors import ContractError
 from contracts.validate import validate
+from geometry import apply_plan
 from sandbox import MESHES
 
 VARIANTS = ("as_generated", "both_moved", "goal_is_moved_start")

@@ -11,9 +11,9 @@ from typing import Any
 
 from hypothesis import strategies as st
 
+from checks.context import SuiteContext
 from checks.hypo import Failure, run_property
 from checks.report import CheckResult
-from checks.context import SuiteContext
 from checks.suites._common import (
     edge_multiset,
     first_difference,

@@ -13,9 +13,9 @@ import numpy as np
 from hypothesis import strategies as st
 
 from checks import images
+from checks.context import SuiteContext
 from checks.hypo import Failure, run_property
 from checks.report import CheckResult
-from checks.context import SuiteContext
 from checks.suites._common import (
     copy_records,
     order_from_keys,

@@ -123,7 +123,7 @@ GOALS: tuple[tuple[str, str | None, str | None], ...] = (
 class Assembly(Domain):
     name = "assembly"
     root = Path(__file__).parent
-    RELATIONS = {  # noqa: RUF012
+    REFERENCE_RELATIONS = {  # noqa: RUF012
         "on": "the source part rests on (is supported by) the target part",
         "adjacent": "the two parts touch side by side (at most 5 mm apart)",
     }

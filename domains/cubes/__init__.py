@@ -72,7 +72,7 @@ def structure(kind: str, ids: Sequence[str]) -> Unit:
 class Cubes(Domain):
     name = "cubes"
     root = Path(__file__).parent
-    RELATIONS = {  # noqa: RUF012
+    REFERENCE_RELATIONS = {  # noqa: RUF012
         "on": "the source cube rests on the target cube",
         "adjacent": "the two cubes stand side by side at the same level, at most 12 mm apart",
     }

@@ -25,7 +25,7 @@ BENCHMARK_FIGURES = 20
 class Tangram(Domain):
     name = "tangram"
     root = Path(__file__).parent
-    RELATIONS = {  # noqa: RUF012
+    REFERENCE_RELATIONS = {  # noqa: RUF012
         "adjacent": "the two pieces touch edge to edge or corner to corner (at most 8 mm apart)",
         "on": "the source piece lies on the target piece",
     }

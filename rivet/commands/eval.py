@@ -47,7 +47,11 @@ def _instances(domain, args: argparse.Namespace) -> list[dict]:
         return out[: args.trials] if args.trials else out
     if args.seed is not None:
         n = args.trials or 60
-        return [domain.generate(args.seed + k).to_dict() for k in range(n)]
+        from sim.settle import physical_problems
+
+        return [
+            domain.generate(args.seed + k, physics=physical_problems).to_dict() for k in range(n)
+        ]
     bench = domain.benchmark()
     # start-major order, so that a short run still covers many goals
     ordered = sorted(bench, key=lambda i: (i.name.split("_start")[-1], i.name))

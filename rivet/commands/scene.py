@@ -48,7 +48,9 @@ def generate(args: argparse.Namespace) -> int:
     from domains.benchmark import dumps
 
     domain = domains.load(args.domain)
-    inst = domain.generate(args.seed)
+    from sim.settle import physical_problems
+
+    inst = domain.generate(args.seed, physics=physical_problems)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(dumps(inst.to_dict()))
     print(f"{args.out}: {domain.name} seed {args.seed}, {len(inst.order)} construction steps")
@@ -163,6 +165,33 @@ def show(args: argparse.Namespace) -> int:
     return 0
 
 
+def benchmark(args: argparse.Namespace) -> int:
+    """Write (or with --check verify) a domain's benchmark files, every scene settled in
+    MuJoCo and every order executable by the robot."""
+    import json
+
+    import domains
+    from domains.benchmark import dumps, regenerate, same
+    from sim.settle import physical_problems
+
+    domain = domains.load(args.domain)
+    domain.benchmark_dir.mkdir(exist_ok=True)
+    differ = []
+    for inst in regenerate(domain, physics=physical_problems):
+        path = domain.benchmark_dir / f"{inst.name}.json"
+        value = inst.to_dict()
+        if args.check:
+            if not path.exists() or not same(json.loads(path.read_text()), value):
+                differ.append(inst.name)
+        else:
+            path.write_text(dumps(value))
+            print(f"{path}: {len(inst.order)} steps")
+    if differ:
+        print(f"{args.domain}: regenerated instances differ: {', '.join(differ)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "scene",
@@ -228,6 +257,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--colors", type=int, metavar="N", help="save a palette PNG of N ≤ 256 colours (smaller)"
     )
     s.set_defaults(handler=show)
+
+    b = scene_sub.add_parser(
+        "benchmark", help="write or verify (--check) a domain's benchmark files (20 goals × 3 starts)"
+    )
+    b.add_argument("domain", metavar="DOMAIN")
+    b.add_argument("--check", action="store_true", help="compare with the files instead of writing")
+    b.set_defaults(handler=benchmark)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from rivet.cli import main
+from sim.settle import physical_problems
 
 FUZZ = settings(
     max_examples=110,
@@ -32,7 +33,7 @@ def observation(tmp_path_factory):
     from sim.observation import observe
 
     d = domains.load("cubes")
-    inst = d.benchmark_instance(1, 1)
+    inst = d.benchmark_instance(1, 1, physics=physical_problems)
     folder = tmp_path_factory.mktemp("obs") / "start"
     cam = d.camera("front")
     small = {**cam, "width": 320, "height": 180, "K": np.asarray(cam["K"]) * [[0.25], [0.25], [1]]}
@@ -45,7 +46,7 @@ def observation(tmp_path_factory):
 def instance():
     import domains
 
-    return domains.load("cubes").benchmark_instance(1, 1).to_dict()
+    return domains.load("cubes").benchmark_instance(1, 1, physics=physical_problems).to_dict()
 
 
 def _run(argv, capsys) -> tuple[int, str]:

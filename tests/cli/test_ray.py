@@ -6,6 +6,7 @@ import pytest
 
 import domains
 from sim.evaluation import EvalConfig, run_eval
+from sim.settle import physical_problems
 
 ray = pytest.importorskip("ray")  # the optional extra; `make test` installs it
 
@@ -29,7 +30,9 @@ def test_eval_trials_fan_out_to_ray_actors(tmp_path, local_ray):
     for name, src in PROGRAMS.items():
         (tmp_path / f"{name}.py").write_text(src)
     d = domains.load("cubes")
-    instances = [d.benchmark_instance(g, 1).to_dict() for g in (1, 2, 3)]
+    instances = [
+        d.benchmark_instance(g, 1, physics=physical_problems).to_dict() for g in (1, 2, 3)
+    ]
     config = EvalConfig(domain="cubes", policy=("programs", str(tmp_path)))
     summary = run_eval(config, instances, workers=2, ray_address=local_ray)
     assert [t["name"] for t in summary["per_trial"]] == [i["name"] for i in instances]

@@ -17,9 +17,8 @@ from scipy.spatial import cKDTree
 
 import domains
 from contracts import validate
-from domains.base import BENCHMARK_GOALS, BENCHMARK_STARTS
-from domains.benchmark import same
-from sim.settle import check_order, check_scene, geometric_problems
+from domains.benchmark import BENCHMARK_GOALS, BENCHMARK_STARTS, same
+from sim.settle import check_order, check_scene, geometric_problems, physical_problems
 
 NAMES = domains.names()
 
@@ -132,16 +131,16 @@ def test_tolerances(domain):
 
 
 def test_same_seed_same_instance(domain):
-    a = domain.generate(7, physics=False).to_dict()
-    b = domain.generate(7, physics=False).to_dict()
-    c = domain.generate(8, physics=False).to_dict()
+    a = domain.generate(7).to_dict()
+    b = domain.generate(7).to_dict()
+    c = domain.generate(8).to_dict()
     assert a == b
     assert a != c
     validate("instance", a)
 
 
 def test_generated_instance_is_physically_valid(domain):
-    inst = domain.generate(11)
+    inst = domain.generate(11, physics=physical_problems)
     assert check_scene(domain, inst.start) == []
     assert check_scene(domain, inst.goal) == []
     assert check_order(domain, inst.start, inst.order, inst.goal) == []
@@ -182,7 +181,7 @@ def test_benchmark_orders_have_a_grasp_at_every_step(domain, benchmark):
 
 
 def test_generated_orders_have_a_grasp_at_every_step(domain):
-    inst = domain.generate(11, physics=False, grasps=True)
+    inst = domain.generate(11, grasps=True)
     assert domain.grasps.first_infeasible(inst.start["objects"], inst.order) is None
     assert check_order(domain, inst.start, inst.order, inst.goal, physics=False) == []
 
@@ -207,22 +206,22 @@ def test_reference_orders_are_physically_executable(domain, benchmark):
 @pytest.mark.parametrize("goal", [1, 2, 13])
 def test_benchmark_regenerates_identically(domain, goal):
     for start in range(1, BENCHMARK_STARTS + 1):
-        inst = domain.benchmark_instance(goal, start)
+        inst = domain.benchmark_instance(goal, start, physics=physical_problems)
         committed = json.loads(domain.benchmark_path(goal, start).read_text())
         assert same(committed, inst.to_dict()), inst.name
 
 
 def test_reference_relations_are_a_node_link_multigraph(domain, benchmark):
     ref = benchmark[0]
-    graph = domain.relate(ref.goal["objects"])
+    graph = domain.reference_relations(ref.goal["objects"])
     validate("relations", graph)
     assert {n["id"] for n in graph["nodes"]} == set(domain.object_ids)
-    assert {e["type"] for e in graph["edges"]} <= set(domain.RELATIONS)
+    assert {e["type"] for e in graph["edges"]} <= set(domain.REFERENCE_RELATIONS)
     assert graph["edges"], "the reference goal has relations"
     # invariant under a common translation and under record order
     shift = np.eye(4)
     shift[:3, 3] = (0.01, 0.02, 0.0)
     moved = [{**r, "pose": shift @ r["pose"]} for r in ref.goal["objects"]]
     key = lambda g: sorted((e["source"], e["target"], e["type"]) for e in g["edges"])  # noqa: E731
-    assert key(domain.relate(moved)) == key(graph)
-    assert key(domain.relate(ref.goal["objects"][::-1])) == key(graph)
+    assert key(domain.reference_relations(moved)) == key(graph)
+    assert key(domain.reference_relations(ref.goal["objects"][::-1])) == key(graph)

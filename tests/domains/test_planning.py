@@ -50,7 +50,7 @@ def pyramid_instance():
 
 def test_a_geometric_order_can_be_unexecutable(cubes, pyramid_instance):
     start, goal = pyramid_instance
-    steps = cubes.planner.order(start, goal)
+    steps = cubes.reference_planner.order(start, goal)
     bad = cubes.grasps.first_infeasible(start, steps)
     assert bad is not None
     assert "fingers hit" in bad.verdict.reason and bad.verdict.blockers
@@ -58,17 +58,17 @@ def test_a_geometric_order_can_be_unexecutable(cubes, pyramid_instance):
 
 def test_the_robot_planner_finds_an_executable_order(cubes, pyramid_instance):
     start, goal = pyramid_instance
-    steps = cubes.robot_planner.order(start, goal)
+    steps = cubes.robot_reference_planner.order(start, goal)
     assert cubes.grasps.first_infeasible(start, steps) is None
     scene = lambda records: {"domain": "cubes", "objects": records}  # noqa: E731
     assert check_order(cubes, scene(start), steps, scene(goal), physics=False) == []
 
 
 def test_an_executable_geometric_order_is_kept(cubes):
-    inst = cubes.generate(3, physics=False, grasps=False)
-    steps = cubes.planner.order(inst.start["objects"], inst.goal["objects"])
+    inst = cubes.generate(3, grasps=False)
+    steps = cubes.reference_planner.order(inst.start["objects"], inst.goal["objects"])
     assert cubes.grasps.first_infeasible(inst.start["objects"], steps) is None  # premise
-    robot = cubes.robot_planner.order(inst.start["objects"], inst.goal["objects"])
+    robot = cubes.robot_reference_planner.order(inst.start["objects"], inst.goal["objects"])
     assert [s["object"] for s in robot] == [s["object"] for s in steps]
     assert all(
         np.allclose(a["target_pose"], b["target_pose"]) for a, b in zip(robot, steps, strict=True)

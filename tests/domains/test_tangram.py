@@ -63,7 +63,7 @@ def test_figures_are_tight_and_exact(tangram):
         centre = np.asarray(tangram.figures[name]["centre"])
         got = cells([p / UNIT + centre for p in polys])
         assert got == sil, name
-        g = nx.node_link_graph(tangram.relate(recs), edges="edges")
+        g = nx.node_link_graph(tangram.reference_relations(recs), edges="edges")
         adj = nx.Graph((u, v) for u, v, t in g.edges(data="type") if t == "adjacent")
         assert adj.number_of_nodes() == 7 and nx.is_connected(adj), name
 

@@ -107,7 +107,7 @@ def test_generated_instances_and_their_orders_pass():
     d = domains.load("cubes")
     syms = {k: list(d.symmetries(k)) for k in d.mesh_specs}
     for seed in range(6):
-        inst = d.generate(seed, physics=False)
+        inst = d.generate(seed)
         for side in (inst.start, inst.goal):
             assert g.scene_problems(side["objects"], d.shapes) == []
         out = g.apply_plan(

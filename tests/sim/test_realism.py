@@ -278,7 +278,7 @@ def test_example_cameras_see_every_object_of_every_domain(path):
 
 def test_camera_file_forms(tmp_path):
     view = json.loads(Path(CAMERAS[0]).read_text())
-    from domains.base import CameraSpec
+    from domains.catalogue import CameraSpec
 
     spec = CameraSpec(
         name="x", **{k: tuple(v) if isinstance(v, list) else v for k, v in view.items()}

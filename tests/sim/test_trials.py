@@ -8,6 +8,7 @@ import pytest
 
 import domains
 from sim.evaluation import EvalConfig, run_eval, table
+from sim.settle import physical_problems
 from sim.trials import OraclePolicy, PolicyOutput, run_trial
 
 pytestmark = pytest.mark.slow
@@ -54,7 +55,7 @@ BAD_PLANS = {
 @pytest.fixture(scope="module")
 def cubes():
     d = domains.load("cubes")
-    return d, d.benchmark_instance(1, 1)
+    return d, d.benchmark_instance(1, 1, physics=physical_problems)
 
 
 def test_oracle_trial_succeeds_with_precise_placements(cubes):

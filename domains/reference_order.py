@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Planner:
+class ReferencePlanner:
     """Plans construction orders for one domain's objects."""
 
     parts: Mapping[str, Sequence[Piece]]  # mesh key → convex parts
