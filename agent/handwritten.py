@@ -12,12 +12,12 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from contracts.functions import FUNCTIONS
 from agent.clients.base import Author, ModelRequest
 from agent.clients.replay import RecordingClient
 from agent.clients.scripted import ScriptedClient
 from agent.errors import AgentError
 from contracts.errors import UsageError
+from contracts.functions import FUNCTIONS
 
 PREAMBLE = (
     "Hand-written by {names} as the reference for this domain — part of a transcript written "

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from importlib import resources
 from string import Template
 
-from contracts.functions import CODE_DEPS, CONTRACT_DEPS, SIGNATURES
 from agent.clients.base import Block, ImageBlock, ModelRequest, TextBlock
+from contracts.functions import CODE_DEPS, CONTRACT_DEPS, SIGNATURES
 
 
 @dataclass(frozen=True, kw_only=True)

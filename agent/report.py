@@ -9,8 +9,8 @@ import html
 import json
 from pathlib import Path
 
-from contracts.functions import FUNCTIONS, authoring_order
 from agent.journal import Journal
+from contracts.functions import FUNCTIONS, authoring_order
 
 _CSS = """
 body{font:14px/1.45 system-ui,sans-serif;margin:2em auto;max-width:1100px;color:#222}

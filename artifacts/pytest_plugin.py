@@ -89,8 +89,9 @@ class CheckItem(pytest.Item):
         self.program = function
 
     def runtest(self) -> None:
-        from artifacts.store import verify
         from contracts.checks import report_markdown, run_checks
+
+        from artifacts.store import verify
 
         _, sources = verify(self.domain, self.path.parent.parent)
         backend = self.config.getoption("--rivet-sandbox")

@@ -8,10 +8,10 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from contracts.functions import FUNCTIONS
 from artifacts.errors import ArtifactError
 from artifacts.hashing import REPO
 from contracts.errors import UsageError
+from contracts.functions import FUNCTIONS
 
 METRICS = ("state_ac", "plan_sr", "final_sr")
 

@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from contracts.functions import authoring_order
 from artifacts.errors import ArtifactError
 from artifacts.store import verify
+from contracts.functions import authoring_order
 
 
 @dataclass

@@ -14,10 +14,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from contracts.functions import FUNCTIONS, dependencies
 from artifacts.errors import ArtifactError
 from artifacts.hashing import REPO, set_hash, sha256_bytes, sha256_text, tree_hash
 from contracts import ContractError, validate
+from contracts.functions import FUNCTIONS, dependencies
 
 ROOT = REPO / "artifacts"
 

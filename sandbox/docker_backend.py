@@ -29,8 +29,8 @@ import struct
 from pathlib import Path
 from typing import Any
 
-from sandbox._session import Channel, ChannelClosed, HarnessExecutor
 from sandbox import seccomp
+from sandbox._session import Channel, ChannelClosed, HarnessExecutor
 from sandbox.errors import BadJob, SandboxUnavailable
 from sandbox.image import LABEL, docker_client, has_image, image_tag
 

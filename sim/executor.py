@@ -28,10 +28,10 @@ import trimesh
 
 from contracts import se3
 from contracts.errors import UsageError
+from geometry.hand import STROKE, Grasp, Obstacle, plan_grasps
 from sim import robot
 from sim._exec_errors import ExecutionError, FailureKind
 from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments
-from geometry.hand import STROKE, Grasp, Obstacle, plan_grasps
 from sim.ik import ArmIK
 from sim.reach import Reach
 

@@ -16,11 +16,11 @@ from pathlib import Path
 import pytest
 
 import domains
-from contracts.functions import FUNCTIONS
 from agent.context import build_context, reference_observations
 from agent.extract import extract_draft
 from agent.prompt import build_request
 from agent.transcript import Transcript
+from contracts.functions import FUNCTIONS
 from toolbox.docs import toolbox_docs
 
 REPO = Path(__file__).resolve().parents[2]

@@ -7,10 +7,10 @@ import json
 import pytest
 
 from agent.clients import Budget, ScriptedClient
-from contracts.functions import authoring_order
 from agent.errors import AuthoringExhausted, BudgetExceeded
 from agent.journal import Journal
 from agent.loop import AuthoringRun
+from contracts.functions import authoring_order
 
 from .conftest import CONTEXT, bad, good
 

@@ -7,11 +7,11 @@ import json
 import pytest
 
 from agent.clients import Author, RecordingClient, ReplayClient, ScriptedClient
-from contracts.functions import authoring_order
 from agent.errors import ReplayMismatch, TranscriptError
 from agent.journal import Journal
 from agent.loop import AuthoringRun
 from agent.prompt import DomainContext
+from contracts.functions import authoring_order
 
 from .conftest import CONTEXT, bad, good
 

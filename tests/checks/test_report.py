@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contracts import validate
 from checks import CheckResult, build_report, comparable, report_markdown
 from checks.report import compact_poses, trim_traceback
+from contracts import validate
 from contracts.errors import ContractError
 
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from contracts import validate
 from checks import comparable, report_markdown
+from contracts import validate
 
 from .conftest import by_name, failing, program
 
