@@ -1,19 +1,23 @@
-"""Frozen programs per domain (`artifacts/<domain>/`) and the thin runtime that loads them.
+"""Frozen programs per domain (`artifacts/<domain>/`) and the thin runtime that runs them in a
+sandbox session (`artifacts.runtime`), the observation folders it reads
+(`artifacts.observations`), and the policy the trials run (`artifacts.policy`).
 
-The runtime imports neither the model SDK nor Docker.
+The runtime imports neither the model SDK nor the simulator.
 """
 
-from artifacts.errors import ArtifactError, ObservationError
-from artifacts.runtime import System, load, load_modules
+from artifacts.errors import ArtifactError, ObservationError, ProgramFailed
+from artifacts.runtime import Runner, System, from_folder, load
 from artifacts.store import build_manifest, freeze, verify
 
 __all__ = [
     "ArtifactError",
     "ObservationError",
+    "ProgramFailed",
+    "Runner",
     "System",
     "build_manifest",
     "freeze",
+    "from_folder",
     "load",
-    "load_modules",
     "verify",
 ]

@@ -1,108 +1,162 @@
 """The thin runtime: load a domain's frozen programs by hash and run perceive → relate → plan.
 
-Imports neither the model SDK nor Docker: frozen programs were checked in the sandbox when
-they were authored and run in-process here. A file whose hash does not match its manifest is
-refused, with the file named.
+Design rule: frozen programs are model-written code. They run in a sandbox session (Docker by
+default; the local backend when asked for by name), never in the caller's process, so nothing
+the caller holds — a trial's ground truth, the user's environment — is in their reach; they get
+the observation, the meshes and the camera, and nothing else. No model calls, and a file whose
+hash does not match its manifest is refused, with the file named.
+
+    system = load("cubes")
+    with system.runner(executor) as run:
+        plan = run.solve(start_obs, goal_obs)
 """
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 import time
-import types
-from collections.abc import Callable
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import TracebackType
 from typing import Any
 
-from artifacts.errors import ArtifactError
+from artifacts.errors import ArtifactError, ProgramFailed
 from artifacts.store import verify
-from contracts.functions import authoring_order
+from contracts.functions import FUNCTIONS, authoring_order
+from sandbox import MESHES, CallReport, Executor, Program
+
+CALL_TIMEOUT_S = 30.0  # [s] one call of a frozen function (its checks held it to far less)
 
 
 @dataclass
 class System:
-    """A domain's frozen programs, ready to run on observations."""
+    """A domain's frozen programs (their sources), ready to be loaded into a sandbox."""
 
     domain: str
     manifest: dict[str, Any]
-    modules: dict[str, types.ModuleType]
+    sources: dict[str, str]
     meshes: dict[str, Any] = field(default_factory=dict)
-    timings: dict[str, float] = field(default_factory=dict)
 
-    def _fn(self, name: str) -> Callable[..., Any]:
-        return getattr(self.modules[name], name)
+    def program(self) -> Program:
+        ordered = {name: self.sources[name] for name in authoring_order() if name in self.sources}
+        return Program(modules=ordered, meshes=self.meshes)
 
-    def render(self, records, meshes, camera):
-        return self._fn("render")(records, meshes, camera)
+    def runner(self, executor: Executor, *, timeout_s: float = CALL_TIMEOUT_S) -> Runner:
+        """The programs loaded in a session of `executor` (close it, or use `with`)."""
+        return Runner(self, executor, timeout_s=timeout_s)
 
-    def perceive(self, observation: dict) -> list[dict]:
-        return self._fn("perceive")(observation, self.meshes, observation["camera"])
+
+class Runner:
+    """A `System` loaded in one sandbox session; its functions called there.
+
+    Raises `ProgramFailed` (the work failed: exit code 1) when a program does not load, raises,
+    overruns its time or returns what cannot be read.
+    """
+
+    def __init__(self, system: System, executor: Executor, *, timeout_s: float) -> None:
+        self.system = system
+        self.timeout_s = timeout_s
+        self.session = executor.open_session(system.program(), load_timeout_s=120.0)
+        self.timings: dict[str, float] = {}
+        self.cpu: dict[str, float] = {}
+        self.last_states: tuple[dict, dict] | None = None
+        if not self.session.load.ok:
+            self.session.close()
+            raise ProgramFailed(f"the frozen programs do not load: {_why(self.session.load)}")
+
+    def __enter__(self) -> Runner:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.session.close()
+
+    def _call(self, name: str, *args: Any) -> tuple[Any, CallReport]:
+        got = self.session.call(name, name, *args, timeout_s=self.timeout_s)
+        if not got.ok:
+            raise ProgramFailed(f"the frozen `{name}` {_why(got)}")
+        return got.value, got
+
+    def perceive(self, observation: Mapping[str, Any]) -> list[dict]:
+        obs = {k: observation[k] for k in ("rgb", "depth", "camera")}
+        value, _ = self._call("perceive", obs, MESHES, obs["camera"])
+        return value
 
     def relate(self, records: list[dict]) -> dict:
-        return self._fn("relate")(records, self.meshes)
+        value, _ = self._call("relate", records, MESHES)
+        return value
 
     def plan(self, start_state: dict, goal_state: dict) -> dict:
-        return self._fn("plan")(start_state, goal_state, self.meshes)
+        value, _ = self._call("plan", start_state, goal_state, MESHES)
+        return value
 
-    @property
-    def relations_vocabulary(self) -> dict[str, str]:
-        return dict(getattr(self.modules["relate"], "RELATIONS", {}))
+    def solve(self, start_obs: Mapping[str, Any], goal_obs: Mapping[str, Any]) -> dict:
+        """perceive both observations, relate both, plan; per-stage wall and CPU times (of the
+        calls themselves, measured outside the programs) in `timings` and `cpu`."""
+        wall: dict[str, float] = dict.fromkeys(("perceive", "relate", "plan"), 0.0)
+        cpu: dict[str, float] = dict(wall)
+        t0 = time.perf_counter()
 
-    def solve(self, start_obs: dict, goal_obs: dict) -> dict:
-        """perceive both observations, relate both, plan; per-stage timings in `self.timings`."""
-        t = time.perf_counter()
-        start_records = self.perceive(start_obs)
-        goal_records = self.perceive(goal_obs)
-        t1 = time.perf_counter()
-        start = {"objects": start_records, "relations": self.relate(start_records)}
-        goal = {"objects": goal_records, "relations": self.relate(goal_records)}
-        t2 = time.perf_counter()
-        result = self.plan(start, goal)
-        t3 = time.perf_counter()
-        self.timings = {"perceive": t1 - t, "relate": t2 - t1, "plan": t3 - t2, "total": t3 - t}
+        def call(name: str, *args: Any) -> Any:
+            value, got = self._call(name, *args)
+            wall[name] += got.seconds
+            cpu[name] += got.cpu_seconds
+            return value
+
+        def obs(o: Mapping[str, Any]) -> dict[str, Any]:
+            return {k: o[k] for k in ("rgb", "depth", "camera")}
+
+        start_obs, goal_obs = obs(start_obs), obs(goal_obs)
+        start_records = call("perceive", start_obs, MESHES, start_obs["camera"])
+        goal_records = call("perceive", goal_obs, MESHES, goal_obs["camera"])
+        start = {"objects": start_records, "relations": call("relate", start_records, MESHES)}
+        goal = {"objects": goal_records, "relations": call("relate", goal_records, MESHES)}
+        result = call("plan", start, goal, MESHES)
+        wall["total"] = sum(wall.values())
+        cpu["total"] = sum(cpu.values())
+        wall["round_trip"] = time.perf_counter() - t0  # with the sandbox's transfers
+        self.timings, self.cpu = wall, cpu
         self.last_states = (start, goal)
         return result
 
 
-def load_modules(sources: dict[str, str], *, origin: str) -> dict[str, types.ModuleType]:
-    """Execute the sources in DAG order; each is importable by the next under its own name."""
-    modules: dict[str, types.ModuleType] = {}
-    saved = {name: sys.modules.get(name) for name in sources}
-    try:
-        for name in authoring_order():
-            if name not in sources:
-                continue
-            spec = importlib.util.spec_from_loader(name, loader=None, origin=f"{origin}/{name}.py")
-            assert spec is not None
-            module = importlib.util.module_from_spec(spec)
-            module.__file__ = f"{origin}/{name}.py"
-            sys.modules[name] = module  # `from render import render` inside later programs
-            try:
-                exec(compile(sources[name], module.__file__, "exec"), module.__dict__)
-            except Exception as e:
-                raise ArtifactError(
-                    f"{module.__file__} failed to load: {type(e).__name__}: {e}"
-                ) from e
-            if not callable(getattr(module, name, None)):
-                raise ArtifactError(f"{module.__file__} defines no function '{name}'")
-            modules[name] = module
-    finally:
-        for name, old in saved.items():
-            if old is None:
-                sys.modules.pop(name, None)
-            else:
-                sys.modules[name] = old
-    return modules
+def _why(report: CallReport) -> str:
+    if report.verdict == "exception" and report.exception is not None:
+        return f"raised {report.exception.type}: {report.exception.message[:500]}"
+    if report.verdict == "timeout":
+        return "did not return in time"
+    return f"failed ({report.verdict}: {report.detail[:300]})"
+
+
+def read_programs(folder: Path) -> dict[str, str]:
+    """The four sources of a programs folder (`render.py`, …), unverified (no manifest)."""
+    sources = {}
+    for name in FUNCTIONS:
+        path = Path(folder) / f"{name}.py"
+        if not path.is_file():
+            raise ArtifactError(f"{folder}: {path.name} is missing")
+        sources[name] = path.read_text()
+    return sources
 
 
 def load(domain: str, root: Path | None = None, *, meshes: dict[str, Any] | None = None) -> System:
-    """Verify `artifacts/<domain>/` against its manifest and load the programs in-process."""
+    """Verify `artifacts/<domain>/` against its manifest; the system, ready for a sandbox."""
     manifest, sources = verify(domain, root)
-    modules = load_modules(sources, origin=f"artifacts/{domain}")
     if meshes is None:
         import domains
 
         meshes = domains.load(domain).meshes()
-    return System(domain=domain, manifest=manifest, modules=modules, meshes=meshes)
+    return System(domain=domain, manifest=manifest, sources=dict(sources), meshes=meshes)
+
+
+def from_folder(domain: str, folder: Path, *, meshes: dict[str, Any] | None = None) -> System:
+    """A system from a programs folder (no manifest: e.g. an authoring run's programs)."""
+    if meshes is None:
+        import domains
+
+        meshes = domains.load(domain).meshes()
+    return System(domain=domain, manifest={}, sources=read_programs(folder), meshes=meshes)

@@ -1,39 +1,50 @@
-"""Online latency of the thin runtime: `System.solve` (perceive ×2, relate ×2, plan) on the first
-trials of each domain's benchmark that has frozen artifacts. Observations are rendered first and
-not timed; the figure is what `rivet solve` spends after reading its folders."""
+"""Online latency of the thin runtime: `Runner.solve` (perceive ×2, relate ×2, plan) on the first
+trials of each domain's dev benchmark that has frozen artifacts, in a Docker sandbox session as
+`rivet solve` runs them. Observations are rendered first and not timed. Reported per stage: CPU
+time of the calls (measured outside the programs, what the online budget limits), wall time of
+the calls, and the round trip with the sandbox's transfers."""
 
 from __future__ import annotations
 
 import statistics
 import sys
-import time
 
 N = 12
 
 
 def main() -> int:
     import domains
+    import sandbox
     from artifacts import ArtifactError, load
     from sim.observation import observe
 
-    for name in domains.names():
-        d = domains.load(name)
-        try:
-            system = load(name)
-        except ArtifactError as e:
-            print(f"{name}: skipped ({e})")
-            continue
-        times = []
-        for inst in d.benchmark()[:N]:
-            start = observe(d, inst.start, "front", seed=1)
-            goal = observe(d, inst.goal, "front", seed=2)
-            t = time.perf_counter()
-            system.solve(start, goal)
-            times.append(time.perf_counter() - t)
-        print(
-            f"{name}: solve latency over {len(times)} trials: median {1000 * statistics.median(times):.0f} ms, "
-            f"max {1000 * max(times):.0f} ms"
-        )
+    with sandbox.open_executor("docker") as executor:
+        for name in domains.names():
+            d = domains.load(name)
+            try:
+                system = load(name)
+            except ArtifactError as e:
+                print(f"{name}: skipped ({e})")
+                continue
+            cpu: dict[str, list[float]] = {}
+            round_trip = []
+            with system.runner(executor) as run:
+                for inst in d.benchmark()[:N]:
+                    start = observe(d, inst.start, "front", seed=1)
+                    goal = observe(d, inst.goal, "front", seed=2)
+                    run.solve(start, goal)
+                    for stage, seconds in run.cpu.items():
+                        cpu.setdefault(stage, []).append(seconds)
+                    round_trip.append(run.timings["round_trip"])
+            stages = ", ".join(
+                f"{s} {1000 * statistics.median(cpu[s]):.0f}"
+                for s in ("perceive", "relate", "plan")
+            )
+            print(
+                f"{name}: over {len(round_trip)} trials, median CPU ms: {stages}; "
+                f"round trip median {1000 * statistics.median(round_trip):.0f} ms, "
+                f"max {1000 * max(round_trip):.0f} ms"
+            )
     return 0
 
 

@@ -6,6 +6,7 @@ nothing crosses process boundaries but instance names and JSON results.
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import statistics
@@ -19,7 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from sim.trials import HONEST, Protocol
+
 PolicySpec = tuple[str, str | None]  # ("oracle" | "programs" | "artifacts", folder or None)
+POLICY_FACTORY = "artifacts.policy:make_policy"
+"""Who builds the policy in each worker (a path, so that the simulator never imports the
+runtime that sits above it)."""
 
 # The paper's figures (Table I: front camera; Table III: final success on two more viewpoints).
 PAPER = {
@@ -37,41 +43,29 @@ PAPER = {
 
 @dataclass(frozen=True, kw_only=True)
 class EvalConfig:
+    """One evaluation: a domain, a policy, a camera, a protocol.
+
+    Attributes:
+        camera: a view name, or a camera dict (e.g. from `sim.observation.load_camera`).
+        view: how the camera is named in reports (the view name, or the camera file's stem).
+        sandbox: where the policy's programs run ("docker", or "local" for speed).
+    """
+
     domain: str
     policy: PolicySpec
     view: str = "front"
-    weld_assist: bool = False
+    camera: Any = None
+    protocol: Protocol = HONEST
+    split: str = "dev"
+    sandbox: str = "docker"
     record_root: str | None = None
+    policy_factory: str = POLICY_FACTORY
 
 
-def make_policy(domain_name: str, spec: PolicySpec):
-    from sim.trials import OraclePolicy, ProgramPolicy
-
-    kind, folder = spec
-    if kind == "oracle":
-        return OraclePolicy()
-    import domains
-    from artifacts import System, load, load_modules
-
-    domain = domains.load(domain_name)
-    if kind == "artifacts":
-        return ProgramPolicy(load(domain_name, Path(folder) if folder else None), "artifacts")
-    assert folder is not None
-    sources = {}
-    for name in ("render", "perceive", "relate", "plan"):
-        path = Path(folder) / f"{name}.py"
-        if not path.is_file():
-            from contracts.errors import UsageError
-
-            raise UsageError(f"--policy programs {folder}: {path} is missing")
-        sources[name] = path.read_text()
-    system = System(
-        domain=domain_name,
-        manifest={},
-        modules=load_modules(sources, origin=str(folder)),
-        meshes=domain.meshes(),
-    )
-    return ProgramPolicy(system, f"programs {folder}")
+def make_policy(config: EvalConfig) -> Any:
+    module, _, name = config.policy_factory.partition(":")
+    factory = getattr(importlib.import_module(module), name)
+    return factory(config.domain, config.policy, sandbox=config.sandbox)
 
 
 _WORKER: dict[str, Any] = {}
@@ -81,7 +75,7 @@ def _init_worker(config: EvalConfig) -> None:
     import domains
 
     _WORKER["domain"] = domains.load(config.domain)
-    _WORKER["policy"] = make_policy(config.domain, config.policy)
+    _WORKER["policy"] = make_policy(config)
     _WORKER["config"] = config
 
 
@@ -97,8 +91,8 @@ def _run_one(instance_json: dict) -> dict:
             _WORKER["domain"],
             instance,
             _WORKER["policy"],
-            view=cfg.view,
-            weld_assist=cfg.weld_assist,
+            camera=cfg.camera if cfg.camera is not None else cfg.view,
+            protocol=cfg.protocol,
             record_dir=record,
         ).to_dict()
     except Exception as e:  # a broken trial must not stop the run
@@ -131,12 +125,12 @@ def run_eval(
 ) -> dict:
     """Run every instance (JSON dicts) and summarise; results keep the instances' order.
 
-    `ray_address` fans the trials out to Ray actors (see `rivet.scaleout`) instead of local
+    `ray_address` fans the trials out to Ray actors (see `sim.scaleout`) instead of local
     processes.
     """
     results: dict[int, dict] = {}
     if ray_address is not None:
-        from rivet.scaleout import map_with_actors
+        from sim.scaleout import map_with_actors
 
         for i, result in map_with_actors(
             ray_address, _init_worker, config, _run_one, list(instances), workers=workers
@@ -177,6 +171,9 @@ def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
     ]
     yaw = [s["yaw_error"] for t in per_trial for s in t["steps"] if s.get("yaw_error") is not None]
     latency = [t["timings"]["policy"] for t in per_trial if "policy" in t["timings"]]
+    cpu = [
+        t["timings"]["policy_cpu_total"] for t in per_trial if "policy_cpu_total" in t["timings"]
+    ]
     wall = [t["timings"]["total"] for t in per_trial if "total" in t["timings"]]
     sim_t = sum(t["timings"].get("execute_sim", 0.0) for t in per_trial)
     exec_wall = sum(t["timings"].get("execute_wall", 0.0) for t in per_trial)
@@ -186,12 +183,21 @@ def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
         "state_ac": rate("state_ok"),
         "plan_sr": rate("plan_ok"),
         "final_sr": rate("final_ok"),
+        "final_with_failed_plan": sum(t["final_ok"] and not t["plan_ok"] for t in per_trial),
         "view": config.view,
+        "split": config.split,
         "policy": " ".join(p for p in config.policy if p),
-        "weld_assist": config.weld_assist,
+        "protocol": config.protocol.label,
+        "protocol_settings": {
+            "realism": config.protocol.realism,
+            "in_hand": config.protocol.in_hand,
+            "track_objects": config.protocol.track_objects,
+            "weld_assist": config.protocol.weld_assist,
+        },
         "failures": dict(Counter(t["failure"]["stage"] for t in per_trial if t["failure"])),
         "timing": {
             "median_policy_latency_s": statistics.median(latency) if latency else None,
+            "median_policy_cpu_s": statistics.median(cpu) if cpu else None,
             "median_trial_wall_s": statistics.median(wall) if wall else None,
             "realtime_factor": sim_t / exec_wall if exec_wall > 0 else None,
         },
@@ -210,7 +216,9 @@ def table(summary: dict) -> str:
     paper = PAPER.get(d, {})
     pct = lambda v: "   –  " if v is None else f"{100 * v:5.1f}%"  # noqa: E731
     lines = [
-        f"{d} · policy {summary['policy']} · view {summary['view']} · {summary['trials']} trials",
+        f"{d} · policy {summary['policy']} · view {summary['view']} · split "
+        f"{summary.get('split', 'dev')} · {summary['trials']} trials",
+        f"  protocol: {summary.get('protocol', '')}",
         f"  {'metric':<10} {'ours':>7} {'paper':>7}",
     ]
     for key in ("state_ac", "plan_sr", "final_sr"):
@@ -222,9 +230,15 @@ def table(summary: dict) -> str:
             else None
         )
         lines.append(f"  {key:<10} {pct(summary[key]):>7} {pct(ref):>7}")
+    if summary.get("final_with_failed_plan"):
+        lines.append(f"  final successes with a failed plan: {summary['final_with_failed_plan']}")
     t, p = summary["timing"], summary["precision"]
     if t["median_policy_latency_s"] is not None:
-        lines.append(f"  median policy latency {t['median_policy_latency_s'] * 1000:.0f} ms")
+        cpu = t.get("median_policy_cpu_s")
+        lines.append(
+            f"  median policy latency {t['median_policy_latency_s'] * 1000:.0f} ms"
+            + ("" if cpu is None else f" ({cpu * 1000:.0f} ms of CPU in the programs)")
+        )
     if t["median_trial_wall_s"] is not None:
         lines.append(
             f"  median trial wall time {t['median_trial_wall_s']:.1f} s"

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from geometry.hand import GripperStroke
-from sim._exec_errors import RobotModelError
+from sim.errors import RobotModelError
 
 PREFIX = "robot/"
 """Prefix of every element the robot adds to a scene."""

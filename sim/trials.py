@@ -1,8 +1,17 @@
 """One trial: observe start and goal → policy → plan → execute in physics → score.
 
 Design rule: a trial never raises for the work failing; it returns a `TrialResult` whose
-`failure` names the first stage that went wrong (perception, relations, planning, execution),
-so the harness always goes on with the next trial. Only a broken harness raises.
+`failure` names the first stage that went wrong — perception, relations, planning, grasp,
+motion or execution — so the harness always goes on with the next trial. Only a broken
+harness raises.
+
+What each party knows (the honest protocol, `Protocol`): the policy gets the two observations
+— rendered from the true camera with the protocol's realism, handed over with the *calibrated*
+camera — and returns a plan and the states it perceived; the executor gets the plan and the
+perceived start state as its belief, and senses what `Protocol` switches on. The instance's
+ground truth is read only to render the observations and to score. The oracle policy is the
+exception by definition: ground-truth states and the reference construction order, so it
+measures the executor alone.
 """
 
 from __future__ import annotations
@@ -13,12 +22,13 @@ import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Protocol
+from typing import Any, Literal
+from typing import Protocol as TypingProtocol
 
 import mujoco
 import numpy as np
 
-from contracts import ContractError, to_jsonable, validate
+from contracts import ContractError, se3, to_jsonable, validate
 from domains import Domain
 from domains.instance import Instance
 from sim import robot
@@ -26,9 +36,63 @@ from sim.executor import Executor, ExecutorConfig
 from sim.observation import observe, renderer_for
 from sim.scene import body_name, build_spec
 from sim.score import final_success, state_accuracy
+from sim.sensing import EXACT, WRIST_CAMERA, Sensors
 from sim.settle import check_order
 
-Stage = Literal["perception", "relations", "planning", "execution", "harness"]
+Stage = Literal["perception", "relations", "planning", "grasp", "motion", "execution", "harness"]
+# which stage an executor failure belongs to
+_STAGE_OF_KIND: dict[str, Stage] = {
+    "unknown_object": "planning",
+    "non_rigid_target": "planning",
+    "not_perceived": "perception",
+    "no_grasp": "grasp",
+    "grasp_failed": "grasp",
+    "unreachable": "motion",
+    "dropped": "execution",
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Protocol:
+    """What a trial's observations are like and what the robot senses while executing.
+
+    Attributes:
+        realism: observation realism level (`sim.realism`): clean, default or harsh.
+        in_hand: the in-hand pose estimate after the grasp: "wrist" (a wrist camera, with
+            `sim.sensing.WRIST_CAMERA`'s noise), "exact" (the true pose in the hand) or "none"
+            (open loop).
+        track_objects: the executor reads every object's true pose before each pick (a
+            ground-truth tracker: no real robot has it).
+        weld_assist: the physics aid of `sim.weld`.
+    """
+
+    realism: str = "default"
+    in_hand: Literal["wrist", "exact", "none"] = "wrist"
+    track_objects: bool = False
+    weld_assist: bool = False
+
+    @property
+    def label(self) -> str:
+        sensed = {"wrist": "wrist-camera in-hand estimate", "exact": "exact in-hand pose",
+                  "none": "no in-hand estimate"}[self.in_hand]  # fmt: skip
+        parts = [f"{self.realism} realism", sensed]
+        if self.track_objects:
+            parts.append("ground-truth object tracker")
+        if self.weld_assist:
+            parts.append("weld assist")
+        return ", ".join(parts)
+
+    def executor_config(self, base: ExecutorConfig | None = None) -> ExecutorConfig:
+        from dataclasses import replace
+
+        noise = {"wrist": WRIST_CAMERA, "exact": EXACT, "none": None}[self.in_hand]
+        return replace(base or ExecutorConfig(), in_hand=noise, track_objects=self.track_objects)
+
+
+HONEST = Protocol()
+PREVIOUS = Protocol(realism="clean", in_hand="exact", track_objects=True)
+"""The protocol of the tables before the honest one: clean images, the true camera, and an
+executor that reads every object's true pose."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,38 +105,25 @@ class PolicyOutput:
     timings: dict[str, float] = field(default_factory=dict)  # [s]
 
 
-class Policy(Protocol):
-    name: str
+class Policy(TypingProtocol):
+    """A policy sees only the two observations (with the calibrated camera)."""
 
-    def solve(
-        self, domain: Domain, instance: Instance, start_obs: dict, goal_obs: dict
-    ) -> PolicyOutput: ...
+    name: str
+    oracle: bool
+
+    def solve(self, domain: Domain, start_obs: dict, goal_obs: dict) -> PolicyOutput: ...
 
 
 class OraclePolicy:
-    """Ground truth and the generator's construction order: measures the executor alone."""
+    """Ground truth and the reference construction order: measures the executor alone."""
 
     name = "oracle"
+    oracle = True
 
-    def solve(self, domain, instance, start_obs, goal_obs) -> PolicyOutput:
+    def solve_from_truth(self, instance: Instance) -> PolicyOutput:
         steps = [{"object": s["object"], "target_pose": s["target_pose"]} for s in instance.order]
         return PolicyOutput(
             plan={"status": "ok", "steps": steps}, start_state=None, goal_state=None
-        )
-
-
-class ProgramPolicy:
-    """Runs loaded programs (a `artifacts.System`) in-process."""
-
-    def __init__(self, system, name: str) -> None:
-        self.system = system
-        self.name = name
-
-    def solve(self, domain, instance, start_obs, goal_obs) -> PolicyOutput:
-        plan = self.system.solve(start_obs, goal_obs)
-        start, goal = self.system.last_states
-        return PolicyOutput(
-            plan=plan, start_state=start, goal_state=goal, timings=dict(self.system.timings)
         )
 
 
@@ -87,6 +138,7 @@ class TrialResult:
     steps: list[dict]
     object_errors: list[dict]
     execution_failure: dict | None = None  # the executor's own failure (step, kind, phase, reason)
+    plan_failure: str | None = None  # why the plan failed its abstract check, when it did
 
     def to_dict(self) -> dict:
         return {
@@ -99,6 +151,7 @@ class TrialResult:
             "steps": self.steps,
             "object_errors": self.object_errors,
             "execution_failure": self.execution_failure,
+            "plan_failure": self.plan_failure,
         }
 
 
@@ -121,22 +174,54 @@ def _state_reason(score, side: str) -> tuple[Stage, str]:
     )
 
 
+def observations(
+    domain: Domain, instance: Instance, camera: Any, protocol: Protocol
+) -> tuple[dict, dict]:
+    """The trial's start and goal observations: seeded by the instance's name, one camera
+    calibrated once for both (what the policy is given)."""
+    calibration = _seed(instance.name, "camera")
+    return tuple(  # type: ignore[return-value]
+        observe(
+            domain,
+            scene,
+            camera,
+            seed=_seed(instance.name, side),
+            realism=protocol.realism,
+            calibration_seed=calibration,
+        )
+        for side, scene in (("start", instance.start), ("goal", instance.goal))
+    )
+
+
+def belief_of(state: Mapping | None) -> dict[str, np.ndarray]:
+    """The executor's belief from a perceived state: the poses of its valid records."""
+    out: dict[str, np.ndarray] = {}
+    for r in (state or {}).get("objects", []) if isinstance(state, Mapping) else []:
+        try:
+            T = se3.as_matrix(r["pose"])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if se3.is_rigid(T, tol=1e-3):
+            out[str(r["id"])] = T
+    return out
+
+
 def run_trial(
     domain: Domain,
     instance: Instance,
-    policy: Policy,
+    policy: Any,
     *,
-    view: str = "front",
-    weld_assist: bool = False,
+    camera: Any = "front",
+    protocol: Protocol = HONEST,
     record_dir: Path | None = None,
     config: ExecutorConfig | None = None,
 ) -> TrialResult:
-    """Run one trial end to end; see the module docstring."""
+    """Run one trial end to end; see the module docstring. `camera`: a view name or a camera
+    dict (the true camera; the policy gets it calibrated)."""
     timings: dict[str, float] = {}
     failure: tuple[Stage, str] | None = None
     t0 = time.perf_counter()
-    start_obs = observe(domain, instance.start, view, seed=_seed(instance.name, "start"))
-    goal_obs = observe(domain, instance.goal, view, seed=_seed(instance.name, "goal"))
+    start_obs, goal_obs = observations(domain, instance, camera, protocol)
     timings["observe"] = time.perf_counter() - t0
     if record_dir is not None:
         _save_png(record_dir / "start.png", start_obs["rgb"])
@@ -145,7 +230,10 @@ def run_trial(
     # -- policy -------------------------------------------------------------------------------
     t = time.perf_counter()
     try:
-        out = policy.solve(domain, instance, start_obs, goal_obs)
+        if getattr(policy, "oracle", False):
+            out = policy.solve_from_truth(instance)
+        else:
+            out = policy.solve(domain, start_obs, goal_obs)
     except Exception as e:
         return TrialResult(
             name=instance.name,
@@ -175,8 +263,9 @@ def run_trial(
         elif not g_score.correct:
             failure = _state_reason(g_score, "goal")
 
-    # -- plan success (abstract, physics-free) ------------------------------------------------
+    # -- plan success (abstract, physics-free: geometry.apply_plan, as the plan checks) -------
     plan_ok = False
+    plan_failure: str | None = None
     steps: list[dict] = []
     raw = to_jsonable(out.plan)
     valid = False
@@ -185,17 +274,20 @@ def run_trial(
         valid = True
     except ContractError as e:
         plan = None
-        failure = failure or ("planning", f"plan is malformed: {e}")
+        plan_failure = f"plan is malformed: {e}"
+        failure = failure or ("planning", plan_failure)
         if _executable_shape(raw):
             plan = raw  # let the executor refuse it step by step, naming the step
     if plan is not None and plan["status"] != "ok":
-        failure = failure or ("planning", f"plan says infeasible: {plan['reason']}")
+        plan_failure = f"plan says infeasible: {plan['reason']}"
+        failure = failure or ("planning", plan_failure)
     elif valid and plan is not None:
         steps = plan["steps"]
         problems = check_order(domain, instance.start, steps, instance.goal, physics=False)
         plan_ok = not problems
         if problems:
-            failure = failure or ("planning", f"{problems[0].object}: {problems[0].problem}")
+            plan_failure = f"{problems[0].object}: {problems[0].problem}"
+            failure = failure or ("planning", plan_failure)
 
     # -- execution in physics ---------------------------------------------------------------
     final_ok = False
@@ -205,13 +297,29 @@ def run_trial(
     if plan is not None and plan["status"] == "ok":
         t = time.perf_counter()
         model, data = _world(domain, instance)
-        recorder = _Recorder(model, domain.camera(view)) if record_dir is not None else None
+        view = domain.camera(camera) if isinstance(camera, str) else camera
+        recorder = _Recorder(model, view) if record_dir is not None else None
         meshes = {
             o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
             for o in instance.start["objects"]
         }
+        belief = (
+            {o["id"]: np.asarray(o["pose"], float) for o in instance.start["objects"]}
+            if out.start_state is None  # the oracle: ground-truth states
+            else belief_of(out.start_state)
+        )
+        exec_config = protocol.executor_config(config)
+        sensors = Sensors.of(
+            model,
+            data,
+            [o["id"] for o in instance.start["objects"]],
+            in_hand=exec_config.in_hand,
+            track_objects=exec_config.track_objects,
+            weld_assist=protocol.weld_assist,
+            seed=_seed(instance.name, "in-hand"),
+        )
         executor = Executor(
-            model, data, meshes, weld_assist=weld_assist, record=recorder, config=config
+            model, data, meshes, belief=belief, sensors=sensors, record=recorder, config=exec_config
         )
         result = executor.execute(plan)
         timings["execute_wall"] = result.wall_time
@@ -221,7 +329,7 @@ def run_trial(
             f = result.failure
             execution_failure = result.failure.to_dict()
             failure = failure or (
-                "execution",
+                _STAGE_OF_KIND.get(f.kind, "execution"),
                 f"step {f.step} ({f.object}, {f.phase}): {f.kind}: {f.reason}",
             )
         final = _final_scene(domain, instance, model, data)
@@ -264,6 +372,7 @@ def run_trial(
         steps=step_info,
         object_errors=object_errors,
         execution_failure=execution_failure,
+        plan_failure=plan_failure,
     )
 
 
@@ -285,6 +394,7 @@ def _world(domain: Domain, instance: Instance) -> tuple[mujoco.MjModel, mujoco.M
 
 
 def _final_scene(domain: Domain, instance: Instance, model, data) -> dict:
+    """The objects' true poses at the end: scoring."""
     objects = []
     for o in instance.start["objects"]:
         b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name(o["id"]))
@@ -296,7 +406,7 @@ def _final_scene(domain: Domain, instance: Instance, model, data) -> dict:
 
 
 def _released(model, data, object_ids) -> bool:
-    """No contact between any robot body and any object body."""
+    """No contact between any robot body and any object body (scoring)."""
     objects = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name(i)) for i in object_ids}
     robot_bodies = {b for b in range(model.nbody) if model.body(b).name.startswith(robot.PREFIX)}
     for c in data.contact[: data.ncon]:

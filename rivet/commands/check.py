@@ -17,6 +17,7 @@ from typing import Any
 
 from contracts.errors import UsageError
 from contracts.functions import CODE_DEPS, FUNCTIONS
+from rivet.commands._options import add_sandbox_option
 
 
 def register(subparsers: Any) -> None:
@@ -35,12 +36,7 @@ def register(subparsers: Any) -> None:
         metavar="DIR",
         help="folder holding the frozen functions the draft depends on, as <name>.py",
     )
-    p.add_argument(
-        "--sandbox",
-        choices=("docker", "local"),
-        default="docker",
-        help="backend (default docker; local isolates nothing and says so)",
-    )
+    add_sandbox_option(p, what="the draft and its frozen dependencies")
     p.add_argument(
         "--out",
         type=Path,

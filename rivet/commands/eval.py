@@ -13,6 +13,7 @@ import argparse
 from pathlib import Path
 
 from contracts.errors import UsageError
+from rivet.commands._options import add_sandbox_option
 
 VIEWS = ("front", "view1", "view2")
 
@@ -52,13 +53,40 @@ def _instances(domain, args: argparse.Namespace) -> list[dict]:
         return [
             domain.generate(args.seed + k, physics=physical_problems).to_dict() for k in range(n)
         ]
-    bench = domain.benchmark()
+    bench = domain.benchmark() if args.split == "dev" else domain.benchmark(split=args.split)
     # start-major order, so that a short run still covers many goals
     ordered = sorted(bench, key=lambda i: (i.name.split("_start")[-1], i.name))
     return [i.to_dict() for i in ordered[: args.trials or len(ordered)]]
 
 
-def _eval_one(domain_name: str, args: argparse.Namespace, view: str) -> dict:
+def protocol_of(args: argparse.Namespace):
+    """The trial protocol the options name (`--protocol previous` is clean images, the true
+    camera, an exact in-hand pose and a ground-truth object tracker)."""
+    from sim.trials import HONEST, PREVIOUS, Protocol
+
+    base = PREVIOUS if args.protocol == "previous" else HONEST
+    return Protocol(
+        realism=args.realism or base.realism,
+        in_hand=args.in_hand or base.in_hand,
+        track_objects=args.track_objects or base.track_objects,
+        weld_assist=args.weld_assist,
+    )
+
+
+def cameras_of(args: argparse.Namespace) -> list[tuple[str, object]]:
+    """(label, camera) per camera to evaluate: named views, then camera files."""
+    out: list[tuple[str, object]] = []
+    if args.camera:
+        from sim.observation import load_camera
+
+        out += [(Path(f).stem, load_camera(f)) for f in args.camera]
+    if not args.camera or args.view != "front" or args.all:
+        views = VIEWS if args.all or args.view == "all" else [args.view]
+        out = [(v, None) for v in views] + out
+    return out
+
+
+def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: object) -> dict:
     import domains
     from sim.evaluation import EvalConfig, progress_bar, run_eval, table
 
@@ -76,7 +104,10 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str) -> dict:
         domain=domain_name,
         policy=policy,
         view=view,
-        weld_assist=args.weld_assist,
+        camera=camera,
+        protocol=protocol_of(args),
+        split=args.split,
+        sandbox=args.sandbox,
         record_root=str(Path(args.record) / domain_name / view) if args.record else None,
     )
     summary = run_eval(
@@ -95,30 +126,33 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str) -> dict:
 def run(args: argparse.Namespace) -> int:
     import domains
     from sim.evaluation import PAPER, write_json
+    from sim.trials import HONEST
 
     names = domains.names() if args.all else [domains.load(args.domain).name]
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
-    views = VIEWS if args.all or args.view == "all" else [args.view]
+    cams = cameras_of(args)
     results: dict[str, dict[str, dict]] = {}
     for name in names:
-        for view in views:
-            results.setdefault(name, {})[view] = _eval_one(name, args, view)
+        for view, camera in cams:
+            results.setdefault(name, {})[view] = _eval_one(name, args, view, camera)
     if args.json:
-        out = results[names[0]][views[0]] if len(names) == 1 and len(views) == 1 else results
+        out = results[names[0]][cams[0][0]] if len(names) == 1 and len(cams) == 1 else results
         write_json(out, Path(args.json))
     if (
         _policy(args.policy)[0] == "artifacts"
         and not args.seed
         and not args.instances
         and not args.trials
+        and args.split == "dev"
+        and protocol_of(args) == HONEST
     ):
         for name in names:
             if "front" in results[name]:
                 front = results[name]["front"]
                 front["views"] = {v: results[name][v]["final_sr"] for v in results[name]}
                 write_json(front, Path("artifacts") / name / "eval.json")
-    if args.all:
+    if args.all and all("front" in results[n] and "view1" in results[n] for n in names):
         print("\nTable I (front camera) — ours vs paper")
         print(f"  {'domain':<10} {'state_ac':>16} {'plan_sr':>16} {'final_sr':>16}")
         for name in names:
@@ -189,6 +223,43 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="write an MP4 + start/goal/final PNGs per trial",
     )
+    p.add_argument(
+        "--split",
+        choices=("dev", "test"),
+        default="dev",
+        help="benchmark split: dev (tune on it) or test (report it, never tune on it)",
+    )
+    p.add_argument(
+        "--camera",
+        action="append",
+        default=[],
+        metavar="FILE.json",
+        help="a camera file (DESIGN camera format); repeatable; replaces --view unless given",
+    )
+    p.add_argument(
+        "--realism",
+        choices=("clean", "default", "harsh"),
+        default=None,
+        help="observation realism (default: default; see docs/observations.md)",
+    )
+    p.add_argument(
+        "--in-hand",
+        choices=("wrist", "exact", "none"),
+        default=None,
+        help="in-hand pose estimate after the grasp: a wrist camera (default), exact, none",
+    )
+    p.add_argument(
+        "--track-objects",
+        action="store_true",
+        help="give the executor every object's true pose before each pick (no real robot can)",
+    )
+    p.add_argument(
+        "--protocol",
+        choices=("honest", "previous"),
+        default="honest",
+        help="previous: --realism clean --in-hand exact --track-objects (the earlier tables)",
+    )
+    add_sandbox_option(p, what="the policy's programs")
     p.add_argument(
         "--weld-assist",
         action="store_true",

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.errors import UsageError
+from rivet.commands._options import add_sandbox_option
 
 
 def register(subparsers: Any) -> None:
@@ -23,12 +24,7 @@ def register(subparsers: Any) -> None:
     run.add_argument(
         "--input", default="{}", help="keyword arguments as a JSON object, or @FILE.json"
     )
-    run.add_argument(
-        "--sandbox",
-        choices=("docker", "local"),
-        default="docker",
-        help="backend (default docker; local isolates nothing)",
-    )
+    add_sandbox_option(run, what="the file")
     run.add_argument("--timeout", type=float, default=30.0, help="time budget [s] (default 30)")
     run.add_argument("--memory", type=int, default=1024, help="memory limit [MiB] (default 1024)")
     run.add_argument(

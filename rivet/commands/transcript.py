@@ -8,6 +8,8 @@ import shutil
 import sys
 from pathlib import Path
 
+from rivet.commands._options import add_sandbox_option
+
 
 def pack(args: argparse.Namespace) -> int:
     import domains
@@ -62,5 +64,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("programs", metavar="PROGRAMS_DIR")
     q.add_argument("--out", default=None, help="default: domains/DOMAIN/transcripts/reference")
     q.add_argument("--names", nargs="+", default=["the RIVET team"], help="who wrote the programs")
-    q.add_argument("--sandbox", choices=("docker", "local"), default="docker")
+    add_sandbox_option(q, what="the replayed drafts")
     q.set_defaults(handler=pack)

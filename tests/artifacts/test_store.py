@@ -13,11 +13,14 @@ from artifacts import ArtifactError, build_manifest, freeze, load, verify
 SOURCES = {
     "render": "def render(records, meshes, camera):\n    return {'n': len(records)}\n",
     "perceive": "from render import render\n\ndef perceive(observation, meshes, camera):\n"
-    "    return [{'id': 'a', 'mesh': 'm', 'pose': observation['pose']}]\n",
+    "    x = observation['depth'][0][0]\n"
+    "    pose = [[1.0, 0, 0, x], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]\n"
+    "    return [{'id': 'a', 'mesh': 'm', 'pose': pose}]\n",
     "relate": "RELATIONS = {'on': 'rests on'}\n\ndef relate(records, meshes):\n"
     "    return {'directed': True, 'multigraph': True, 'graph': {}, "
     "'nodes': [{'id': r['id']} for r in records], 'edges': []}\n",
-    "plan": "def plan(start, goal):\n    s = start['objects'][0]['pose']; g = goal['objects'][0]['pose']\n"
+    "plan": "def plan(start, goal, meshes):\n"
+    "    s = start['objects'][0]['pose']; g = goal['objects'][0]['pose']\n"
     "    return {'status': 'ok', 'steps': [] if s == g else [{'object': 'a', 'target_pose': g}]}\n",
 }
 AUTHOR = {"kind": "people", "names": ["RIVET tests"]}
@@ -74,16 +77,47 @@ def test_a_missing_file_is_refused(root, name):
         verify("toy", root)
 
 
-def test_runtime_solves_in_process(root):
+def _observation(x: float) -> dict:
+    return {"rgb": [[[0, 0, 0]]], "depth": [[x]], "camera": {"width": 1, "height": 1}}
+
+
+def test_the_runtime_runs_the_programs_in_a_sandbox_session(root):
+    import sandbox
+
     system = load("toy", root, meshes={})
-    eye = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
+    with sandbox.open_executor("local", quiet=True) as executor, system.runner(executor) as run:
+        plan = run.solve(_observation(0.0), _observation(0.1))
+        assert set(run.timings) == {"perceive", "relate", "plan", "total", "round_trip"}
+        assert run.cpu["perceive"] >= 0.0
+        start, goal = run.last_states
     moved = [[1.0, 0, 0, 0.1], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
-    cam = {"width": 4, "height": 4}
-    plan = system.solve({"pose": eye, "camera": cam}, {"pose": moved, "camera": cam})
     assert plan == {"status": "ok", "steps": [{"object": "a", "target_pose": moved}]}
-    assert set(system.timings) == {"perceive", "relate", "plan", "total"}
-    assert system.relations_vocabulary == {"on": "rests on"}
-    assert "render" not in sys.modules  # program modules are not left behind
+    assert start["relations"]["nodes"] == [{"id": "a"}] and goal["objects"][0]["pose"] == moved
+    assert "render" not in sys.modules and "perceive" not in sys.modules  # not in this process
+
+
+@pytest.mark.parametrize(
+    ("plan_source", "message"),
+    [
+        ("def plan(start, goal, meshes):\n    raise RuntimeError('boom')\n", "raised RuntimeError"),
+        ("import time\ndef plan(start, goal, meshes):\n    time.sleep(60)\n", "in time"),
+        ("def plan(start, goal, meshes:\n", "do not load"),
+    ],
+    ids=["raises", "overruns", "does-not-load"],
+)
+def test_a_failing_frozen_program_is_a_program_failure(tmp_path, plan_source, message):
+    import sandbox
+    from artifacts.errors import ProgramFailed
+
+    sources = {**SOURCES, "plan": plan_source}
+    freeze("toy", sources, build_manifest("toy", sources, author=AUTHOR), tmp_path)
+    system = load("toy", tmp_path, meshes={})
+    with (
+        sandbox.open_executor("local", quiet=True) as executor,
+        pytest.raises(ProgramFailed, match=message),
+        system.runner(executor, timeout_s=2.0) as run,
+    ):
+        run.solve(_observation(0.0), _observation(0.1))
 
 
 def test_runtime_imports_neither_the_model_sdk_nor_docker(root):

@@ -14,7 +14,7 @@ PROGRAMS = {
     "render": "def render(records, meshes, camera):\n    raise NotImplementedError\n",
     "perceive": "def perceive(observation, meshes, camera):\n    return []\n",
     "relate": "RELATIONS = {}\n\ndef relate(records, meshes):\n    return {'directed': True, 'multigraph': True, 'graph': {}, 'nodes': [], 'edges': []}\n",
-    "plan": "import numpy as np\n\ndef plan(start, goal):\n    return {'status': 'ok', 'steps': [{'object': 'magenta', 'target_pose': np.eye(4)}]}\n",
+    "plan": "import numpy as np\n\ndef plan(start, goal, meshes):\n    return {'status': 'ok', 'steps': [{'object': 'magenta', 'target_pose': np.eye(4)}]}\n",
 }
 
 

@@ -29,7 +29,9 @@ def test_package_reexports_every_public_name_of_every_module():
 
 
 @pytest.mark.parametrize(
-    ("module", "attr", "obj"), list(public_objects()), ids=lambda x: str(x)[:30]
+    ("module", "attr", "obj"),
+    list(public_objects()),
+    ids=[f"{m}.{a}" for m, a, _ in public_objects()],
 )
 def test_every_public_name_is_documented(module, attr, obj):
     doc = inspect.getdoc(obj)
@@ -43,7 +45,7 @@ def test_docs_list_every_public_name_and_are_deterministic():
     for module, attr, _ in public_objects():
         assert f"## toolbox.{module}" in text
         assert f"`{attr}" in text, attr
-    assert len(text) < 40_000  # a prompt section, not a manual (~4 characters per token)
+    assert len(text) < 44_000  # a prompt section (~11k tokens), not a manual
 
 
 def test_docs_can_be_restricted_to_modules():
