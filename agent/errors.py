@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from contracts.errors import RivetError, UsageError
+
+if TYPE_CHECKING:
+    from agent.clients.base import Usage
 
 
 class AgentError(RivetError):
@@ -10,11 +15,42 @@ class AgentError(RivetError):
 
 
 class BudgetExceeded(AgentError):
-    """The next model call would exceed `--max-usd` or `--max-calls`; it was not made."""
+    """The next model call would exceed `--max-usd` or `--max-calls`; it was not made.
+
+    `usage` is None, unless the refusal came before a retry of a call whose broken first
+    attempt had already cost something: then it is that cost, for the journal.
+    """
+
+    usage: Usage | None = None
 
 
 class ModelCallFailed(AgentError):
-    """The model API failed after the SDK's retries."""
+    """The model API failed after the retries.
+
+    `usage` is what the failed call is known to have consumed (billed tokens of a refusal, a
+    stream cut off mid-way, …), or None when nothing is known; the journal records it and the
+    budget has counted it.
+    """
+
+    def __init__(self, message: str, *, usage: Usage | None = None) -> None:
+        super().__init__(message)
+        self.usage = usage
+
+
+class ApiUnreachable(ModelCallFailed):
+    """No connection to the model API could be made (refused, timed out, no route)."""
+
+
+class ModelRefused(ModelCallFailed):
+    """The model declined to answer (`stop_reason: refusal`, or a content filter)."""
+
+
+class ContextWindowExceeded(ModelCallFailed):
+    """The prompt (or the prompt plus the answer) does not fit the model's context window."""
+
+
+class AgentCommandFailed(AgentError):
+    """An `--agent COMMAND` did not answer: non-zero exit, timeout, or no response file."""
 
 
 class ReplayMismatch(AgentError):

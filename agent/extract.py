@@ -1,7 +1,9 @@
 """Take the draft out of a model response: exactly one ```python block defining the function.
 
 A malformed response is the model's mistake, not the run's: it becomes a check report of
-category `interface` that goes back to the model like any other failure.
+category `interface` that goes back to the model like any other failure. A response cut off at
+the output limit (`stop_reason: max_tokens`) that holds no usable draft is reported as such
+(`truncated_error`, check `response_complete`), not as a missing code block.
 """
 
 from __future__ import annotations
@@ -45,17 +47,36 @@ def extract_draft(text: str, function: str) -> str:
     return source if source.endswith("\n") else source + "\n"
 
 
-def format_error_report(domain: str, function: str, error: DraftFormatError) -> dict:
+def truncated_error(function: str, max_tokens: int, next_max_tokens: int) -> DraftFormatError:
+    """What the model is told when its answer was cut off at `max_tokens`."""
+    if next_max_tokens > max_tokens:
+        room = f"the next attempt may use up to {next_max_tokens} tokens"
+    else:
+        room = f"{max_tokens} tokens is already the most an answer may use, so write less"
+    return DraftFormatError(
+        f"your answer was cut off: it reached the output limit of {max_tokens} tokens before "
+        f"it ended (stop_reason: max_tokens), so it holds no complete draft; {room}. Answer "
+        f"with exactly one complete ```python block holding the whole module that defines "
+        f"`{function}`, with little prose around it"
+    )
+
+
+TRUNCATED_CHECK = "response_complete"
+
+
+def format_error_report(
+    domain: str, function: str, error: DraftFormatError, *, check: str = "response_format"
+) -> dict:
     """A check report (contracts/schemas/check_report.schema.json) for a malformed response."""
     return {
         "schema_version": 1,
         "domain": domain,
         "function": function,
         "passed": False,
-        "first_failure": "response_format",
+        "first_failure": check,
         "checks": [
             {
-                "name": "response_format",
+                "name": check,
                 "category": "interface",
                 "status": "failed",
                 "message": str(error),

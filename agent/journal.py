@@ -9,6 +9,13 @@ runs/<domain>/<run>/frozen/<fn>.py           the passing draft
 ```
 A run killed at any point resumes from these files: a saved response is never requested
 again, and a frozen function is never authored again.
+
+The journal is also the run's ledger: each `response` event carries its usage in dollars, and a
+call that failed after the API billed something (a refusal, a stream cut off and never
+finished) leaves a `call_failed` event with the usage known. `RunState.spent_usd` sums both,
+and `rivet author --resume` starts its budget from it. A `response` event also keeps the
+answer's `stop_reason` and the `max_tokens` it was asked with, so a resumed run knows which
+saved answers were cut off.
 """
 
 from __future__ import annotations
@@ -28,9 +35,14 @@ from agent.transcript import atomic_write
 class RunState:
     frozen: dict[str, str] = field(default_factory=dict)  # function → source
     attempts: dict[str, int] = field(default_factory=dict)  # function → attempts with a response
-    usage: Usage = field(default_factory=Usage)
-    calls: int = 0
+    usage: Usage = field(default_factory=Usage)  # of the responses
+    calls: int = 0  # billed calls: responses, and failed calls with a known usage
     config: dict[str, Any] = field(default_factory=dict)
+    failed_usage: Usage = field(default_factory=Usage)  # of the failed calls
+
+    @property
+    def spent_usd(self) -> float:
+        return self.usage.usd + self.failed_usage.usd
 
 
 class Journal:
@@ -49,9 +61,20 @@ class Journal:
             os.fsync(f.fileno())
 
     def save_response(
-        self, function: str, attempt: int, response: ModelResponse, request_hash: str
+        self,
+        function: str,
+        attempt: int,
+        response: ModelResponse,
+        request_hash: str,
+        *,
+        max_tokens: int | None = None,
     ) -> None:
         atomic_write(self._file("responses", function, attempt, "md"), response.text)
+        extra: dict[str, Any] = {}
+        if response.stop_reason is not None:
+            extra["stop_reason"] = response.stop_reason
+        if max_tokens is not None:
+            extra["max_tokens"] = max_tokens
         self.event(
             "response",
             function=function,
@@ -59,7 +82,27 @@ class Journal:
             request_hash=request_hash,
             model=response.model,
             usage=response.usage.to_dict(),
+            **extra,
         )
+
+    def call_failed(
+        self,
+        function: str,
+        attempt: int,
+        request_hash: str,
+        error: BaseException,
+        usage: Usage | None,
+    ) -> None:
+        """A call that raised; its usage (when the API billed something) joins the ledger."""
+        fields: dict[str, Any] = {
+            "function": function,
+            "attempt": attempt,
+            "request_hash": request_hash,
+            "error": f"{type(error).__name__}: {error}"[:2000],
+        }
+        if usage is not None:
+            fields["usage"] = usage.to_dict()
+        self.event("call_failed", **fields)
 
     def save_draft(self, function: str, attempt: int, source: str) -> Path:
         path = self._file("drafts", function, attempt, "py")
@@ -94,6 +137,14 @@ class Journal:
         path = self._file("reports", function, attempt, "json")
         return json.loads(path.read_text()) if path.is_file() else None
 
+    def saved_stop_reason(self, function: str, attempt: int) -> str | None:
+        """The stop_reason journaled with the saved response of (function, attempt)."""
+        reason = None
+        for e in self.events():
+            if e["event"] == "response" and (e["function"], e["attempt"]) == (function, attempt):
+                reason = e.get("stop_reason")
+        return reason
+
     def saved_markdown(self, function: str, attempt: int) -> str | None:
         path = self._file("reports", function, attempt, "md")
         return path.read_text() if path.is_file() else None
@@ -117,6 +168,9 @@ class Journal:
             elif e["event"] == "response":
                 st.attempts[e["function"]] = max(st.attempts.get(e["function"], 0), e["attempt"])
                 st.usage = st.usage + Usage.from_dict(e.get("usage", {}))
+                st.calls += 1
+            elif e["event"] == "call_failed" and e.get("usage"):
+                st.failed_usage = st.failed_usage + Usage.from_dict(e["usage"])
                 st.calls += 1
             elif e["event"] == "frozen":
                 st.frozen[e["function"]] = (self.dir / "frozen" / f"{e['function']}.py").read_text()

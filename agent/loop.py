@@ -3,6 +3,11 @@ feedback → repair … → freeze.
 
 Every attempt re-runs all checks; the best draft so far is kept; exhaustion raises
 `AuthoringExhausted` with a state that `--resume` continues from (journal.py).
+
+An answer cut off at its output limit (`stop_reason: max_tokens`) is told so — not "no code
+block" — and the next attempt of that function asks with twice the `max_tokens`, up to
+`MAX_TOKENS_CAP`. A call that fails is journaled (`call_failed`, with the usage the API billed,
+if any) before the error ends the run.
 """
 
 from __future__ import annotations
@@ -14,12 +19,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
-from contracts.functions import CODE_DEPS, authoring_order
-from agent.clients.base import ImageBlock, ModelClient
-from agent.errors import AuthoringExhausted
-from agent.extract import DraftFormatError, extract_draft, format_error_report
+from agent.clients.base import STOP_MAX_TOKENS, ImageBlock, ModelClient
+from agent.errors import AgentError, AuthoringExhausted, BudgetExceeded
+from agent.extract import (
+    TRUNCATED_CHECK,
+    DraftFormatError,
+    extract_draft,
+    format_error_report,
+    truncated_error,
+)
 from agent.journal import Journal
 from agent.prompt import DomainContext, Feedback, build_request
+from contracts.functions import CODE_DEPS, authoring_order
 
 
 class Checker(Protocol):
@@ -43,6 +54,14 @@ class Attempt:
 
 Progress = Callable[[str], None]
 
+DEFAULT_MAX_TOKENS = 16000  # an answer's output limit on a function's first attempt
+MAX_TOKENS_CAP = 64000  # the most it grows to, doubling after each answer cut off
+
+
+def next_max_tokens(current: int, cap: int = MAX_TOKENS_CAP) -> int:
+    """The output limit after an answer was cut off at `current`: doubled, at most `cap`."""
+    return max(current, min(current * 2, cap))
+
 
 def _stderr_progress(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
@@ -63,6 +82,8 @@ class AuthoringRun:
         journal: Journal,
         max_attempts: int = 4,
         progress: Progress = _stderr_progress,
+        max_tokens: int = DEFAULT_MAX_TOKENS,
+        max_tokens_cap: int = MAX_TOKENS_CAP,
     ) -> None:
         self.ctx = ctx
         self.client = client
@@ -70,6 +91,8 @@ class AuthoringRun:
         self.journal = journal
         self.max_attempts = max_attempts
         self.progress = progress
+        self.max_tokens = max_tokens
+        self.max_tokens_cap = max(max_tokens_cap, max_tokens)
         self.history: list[Attempt] = []
         self._t0 = time.monotonic()
 
@@ -94,12 +117,13 @@ class AuthoringRun:
         self.progress(
             f"[{function} {attempt}/{self.max_attempts}] {what}  "
             f"(calls {st.calls}, in {st.usage.input_tokens + st.usage.cache_read_tokens + st.usage.cache_write_tokens} "
-            f"out {st.usage.output_tokens} tok, ${st.usage.usd:.2f}, {time.monotonic() - self._t0:.0f}s)"
+            f"out {st.usage.output_tokens} tok, ${st.spent_usd:.2f}, {time.monotonic() - self._t0:.0f}s)"
         )
 
     def _author(self, function: str, frozen: dict[str, str]) -> str:
         feedback: Feedback | None = None
         best: Attempt | None = None
+        max_tokens = self.max_tokens
         for attempt in range(1, self.max_attempts + 1):
             request = build_request(
                 self.ctx,
@@ -108,6 +132,7 @@ class AuthoringRun:
                 frozen=frozen,
                 feedback=feedback,
                 max_attempts=self.max_attempts,
+                max_tokens=max_tokens,
             )
             text = self.journal.saved_response(function, attempt)
             if text is None:
@@ -115,16 +140,45 @@ class AuthoringRun:
                 self.journal.event(
                     "call", function=function, attempt=attempt, request_hash=request.hash
                 )
-                response = self.client.complete(request)
-                self.journal.save_response(function, attempt, response, request.hash)
-                text = response.text
+                try:
+                    response = self.client.complete(request)
+                except BudgetExceeded as e:  # refused before the call (or before a retry)
+                    if e.usage is not None:
+                        self.journal.call_failed(function, attempt, request.hash, e, e.usage)
+                    else:
+                        self.journal.event(
+                            "refused", function=function, attempt=attempt, reason=str(e)[:2000]
+                        )
+                    raise
+                except AgentError as e:
+                    self.journal.call_failed(
+                        function, attempt, request.hash, e, getattr(e, "usage", None)
+                    )
+                    raise
+                self.journal.save_response(
+                    function, attempt, response, request.hash, max_tokens=request.max_tokens
+                )
+                text, truncated = response.text, response.truncated
+            else:
+                truncated = self.journal.saved_stop_reason(function, attempt) == STOP_MAX_TOKENS
+            grown = next_max_tokens(max_tokens, self.max_tokens_cap) if truncated else max_tokens
+            if truncated:
+                self._say(
+                    function,
+                    attempt,
+                    f"the answer was cut off at max_tokens {max_tokens}; next attempt: {grown}",
+                )
             source: str | None
             try:
                 source = extract_draft(text, function)
             except DraftFormatError as e:
                 source = None
-                report = format_error_report(self.ctx.domain, function, e)
-                markdown = f"**response_format** failed: {e}"
+                error, check = e, "response_format"
+                if truncated:
+                    error = truncated_error(function, max_tokens, grown)
+                    check = TRUNCATED_CHECK
+                report = format_error_report(self.ctx.domain, function, error, check=check)
+                markdown = f"**{check}** failed: {error}"
                 self.journal.save_report(function, attempt, report, markdown)
             else:
                 self.journal.save_draft(function, attempt, source)
@@ -140,12 +194,18 @@ class AuthoringRun:
                         out_dir=self.journal.images_dir(function, attempt),
                     )
                     markdown = self.checker.markdown(report)
+                    if truncated and not report["passed"]:
+                        markdown += (
+                            f"\n\n(Your answer was also cut off at its output limit of "
+                            f"{max_tokens} tokens; the next attempt may use up to {grown}.)"
+                        )
                     self.journal.save_report(function, attempt, report, markdown)
                 else:
                     report = saved
                     markdown = self.journal.saved_markdown(
                         function, attempt
                     ) or self.checker.markdown(report)
+            max_tokens = grown
             result = Attempt(
                 function=function,
                 attempt=attempt,

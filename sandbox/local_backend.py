@@ -7,10 +7,21 @@ caller's included), and no CPU or process-count limits. It gets a scrubbed envir
 time budget enforced from the parent, a memory limit (RLIMIT_DATA), orphan cleanup (the
 harness is a child subreaper) and the same output validation. Only ever used when asked for by
 name (``--sandbox local``); it says so on stderr every time it starts.
+
+One thing it does hide: the caller's own environment and memory, where an API key lives. On
+Linux, starting the backend makes the calling process non-dumpable (``PR_SET_DUMPABLE`` 0), so
+``/proc/<pid>/environ`` and ``/proc/<pid>/mem`` of the rivet process cannot be read by
+processes of the same user; and the harness starts without the capabilities that bypass that
+flag (``CAP_SYS_PTRACE``, and ``CAP_SYS_ADMIN`` / ``CAP_PERFMON``, which grant read access to
+another process's /proc files), dropped from its bounding set before exec: that matters when
+rivet runs as root. Side effects on the rivet process: no core dumps, and
+debuggers or profilers of the same user cannot attach to it. Other processes of yours (the shell
+that exported the key) stay readable: use the docker backend for generated code.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import select
 import subprocess
@@ -25,6 +36,36 @@ WARNING = (
     "rivet sandbox: WARNING: the local backend isolates NOTHING: the draft runs as you, with "
     "your files, network and processes. Use the docker backend for generated code."
 )
+
+
+_PR_CAPBSET_DROP = 24
+_PR_SET_DUMPABLE = 4
+_CAP_SYS_PTRACE = 19
+_CAP_SYS_ADMIN = 21
+_CAP_PERFMON = 38
+
+
+def _prctl(option: int, arg: int) -> bool:
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(option, arg, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def hide_own_environment() -> bool:
+    """Make this process non-dumpable (Linux): its /proc environ and mem become unreadable to
+    other processes of the same user. True when it took effect."""
+    return _prctl(_PR_SET_DUMPABLE, 0)
+
+
+def _drop_ptrace() -> None:
+    """In the harness, before exec: none of the capabilities that read another process's
+    environ or memory (fails, harmlessly, without CAP_SETPCAP: an ordinary user has none)."""
+    for cap in (_CAP_SYS_PTRACE, _CAP_SYS_ADMIN, _CAP_PERFMON):
+        _prctl(_PR_CAPBSET_DROP, cap)
 
 
 class _PipeChannel(Channel):
@@ -75,6 +116,7 @@ class LocalExecutor(HarnessExecutor):
     def _open(self) -> Channel:
         if not self.quiet:
             print(WARNING, file=sys.stderr)
+        hide_own_environment()
         root = str(Path(sandbox.__file__).resolve().parent.parent)
         env = minimal_env({"PYTHONPATH": root, "PATH": os.environ.get("PATH", "/usr/bin:/bin")})
         cmd = [sys.executable, "-m", "sandbox.harness.server", "--local", "--tmp", str(self._tmp)]
@@ -88,6 +130,7 @@ class LocalExecutor(HarnessExecutor):
                     env=env,
                     cwd=self._tmp,
                     start_new_session=True,
+                    preexec_fn=_drop_ptrace,
                 )
         except OSError as e:
             raise SandboxUnavailable(f"cannot start the local harness: {e}") from None

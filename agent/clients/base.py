@@ -105,10 +105,21 @@ class Usage:
 
 @dataclass(frozen=True, kw_only=True)
 class ModelResponse:
+    """One answer. `stop_reason` uses Anthropic's words whatever the client (an OpenAI-compatible
+    `finish_reason: length` is `max_tokens`, `stop` is `end_turn`); None when unknown."""
+
     text: str
     model: str
     usage: Usage = field(default_factory=Usage)
     stop_reason: str | None = None
+
+    @property
+    def truncated(self) -> bool:
+        """The answer was cut off at the output limit (`max_tokens`) before it ended."""
+        return self.stop_reason == STOP_MAX_TOKENS
+
+
+STOP_MAX_TOKENS = "max_tokens"
 
 
 @dataclass(frozen=True, kw_only=True)

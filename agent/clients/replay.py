@@ -2,17 +2,37 @@
 
 Replay is the offline default and what CI uses. Strict mode fails on a request whose hash was
 not recorded; the default matches by (function, attempt) and warns when the prompt drifted.
+
+A recorded response's `stop_reason` is kept in its `meta.json` entry when it is not the plain
+end of an answer (a truncated answer, `max_tokens`, must replay as truncated: the loop raises
+the next attempt's `max_tokens` from it, and that is part of the next request's hash).
 """
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
 from agent.clients.base import Author, ModelClient, ModelRequest, ModelResponse
 from agent.clients.pricing import Budget
 from agent.errors import ReplayMismatch
-from agent.transcript import Entry, Transcript
+from agent.transcript import Entry, Transcript, atomic_write
+
+_PLAIN_STOPS = (None, "end_turn", "stop_sequence")
+
+
+def _stop_reasons(directory: Path) -> dict[str, str]:
+    """file → stop_reason, from the entries of `meta.json` that carry one."""
+    try:
+        meta = json.loads((directory / "meta.json").read_text())
+        return {
+            e["file"]: e["stop_reason"]
+            for e in meta.get("responses", [])
+            if isinstance(e, dict) and e.get("stop_reason")
+        }
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
 
 
 class ReplayClient:
@@ -22,6 +42,7 @@ class ReplayClient:
         self.strict = strict
         self.budget = budget or Budget()
         self.drifted: list[tuple[str, int]] = []
+        self._stops = _stop_reasons(directory)
 
     @property
     def author(self) -> Author:
@@ -60,6 +81,7 @@ class ReplayClient:
             text=self.transcript.texts[entry.file],
             model=entry.model or (self.author.model or "people"),
             usage=entry.usage,
+            stop_reason=self._stops.get(entry.file),
         )
 
 
@@ -72,10 +94,16 @@ class RecordingClient:
         self.inner = inner
         self.directory = directory
         self.transcript = Transcript(domain=domain, written_by=author or inner.author)
+        self.stops: dict[str, str] = {}  # file → a stop_reason worth keeping
 
     @property
     def author(self) -> Author:
         return self.transcript.written_by
+
+    def close(self) -> None:
+        close = getattr(self.inner, "close", None)
+        if close is not None:
+            close()
 
     def complete(self, request: ModelRequest) -> ModelResponse:
         response = self.inner.complete(request)
@@ -102,5 +130,20 @@ class RecordingClient:
         self.transcript.texts = {
             e.file: self.transcript.texts[e.file] for e in self.transcript.entries
         }
+        if response.stop_reason not in _PLAIN_STOPS:
+            self.stops[name] = str(response.stop_reason)
         self.transcript.save(self.directory)
+        self._save_stops()
         return response
+
+    def _save_stops(self) -> None:
+        live = {e.file for e in self.transcript.entries}
+        stops = {f: r for f, r in self.stops.items() if f in live}
+        if not stops:
+            return
+        path = self.directory / "meta.json"
+        meta = json.loads(path.read_text())
+        for e in meta["responses"]:
+            if e["file"] in stops:
+                e["stop_reason"] = stops[e["file"]]
+        atomic_write(path, json.dumps(meta, indent=2) + "\n")

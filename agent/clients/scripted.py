@@ -8,11 +8,12 @@ from agent.clients.base import Author, ModelRequest, ModelResponse, Usage
 from agent.clients.pricing import Budget
 from agent.errors import AgentError
 
-Reply = str | Callable[[ModelRequest], str] | BaseException
+Reply = str | ModelResponse | Callable[[ModelRequest], str | ModelResponse] | BaseException
 
 
 class ScriptedClient:
-    """Replies in order; a reply may be text, a function of the request, or an exception."""
+    """Replies in order; a reply may be text, a `ModelResponse` (e.g. a truncated one), a function
+    of the request returning either, or an exception."""
 
     def __init__(
         self,
@@ -42,6 +43,8 @@ class ScriptedClient:
         reply = self.replies.pop(0)
         if isinstance(reply, BaseException):
             raise reply
-        text = reply(request) if callable(reply) else reply
+        answer = reply(request) if callable(reply) else reply
         self.budget.spend(self.usd_per_call)
-        return ModelResponse(text=text, model=self.model, usage=Usage(usd=self.usd_per_call))
+        if isinstance(answer, ModelResponse):
+            return answer
+        return ModelResponse(text=answer, model=self.model, usage=Usage(usd=self.usd_per_call))

@@ -1,8 +1,9 @@
 """`rivet author DOMAIN`: have a model (or a replayed transcript) write the domain's four
 programs, check every draft in the sandbox, and freeze the passing set in `artifacts/<domain>/`.
 
-Offline by default: with neither `--model` nor `--replay`, it replays
-`domains/<domain>/transcripts/reference`.
+Offline by default: with none of `--model`, `--agent` or `--replay`, it replays
+`domains/<domain>/transcripts/reference`. `docs/agent.md` describes the model options, the
+budget rules and the `--agent` file protocol.
 """
 
 from __future__ import annotations
@@ -16,17 +17,68 @@ from contracts.errors import UsageError
 RUNS = Path("runs")
 
 
-def _client(args: argparse.Namespace, domain, run_dir: Path):
-    from agent.clients import AnthropicClient, Budget, RecordingClient, ReplayClient
+def _model_options(args: argparse.Namespace) -> list[str]:
+    """The model-client options given (they need --model)."""
+    given = []
+    for flag, value in (
+        ("--base-url", args.base_url),
+        ("--thinking", args.thinking),
+        ("--effort", args.effort),
+        ("--price", args.price),
+    ):
+        if value is not None:
+            given.append(flag)
+    return given
 
-    budget = Budget(max_usd=args.max_usd, max_calls=args.max_calls)
+
+def _client(args: argparse.Namespace, domain, run_dir: Path, budget):
+    from agent.clients import (
+        AgentCommandClient,
+        AnthropicClient,
+        OpenAIClient,
+        RecordingClient,
+        ReplayClient,
+    )
+    from agent.clients.pricing import parse_price
+
+    price = parse_price(args.price) if args.price is not None else None
+    if args.agent is not None:
+        if args.max_usd is not None:
+            raise UsageError(
+                "--max-usd cannot be enforced with --agent: RIVET does not see an agent "
+                "command's usage; limit it with --max-calls"
+            )
+        if _model_options(args):
+            raise UsageError(f"{', '.join(_model_options(args))}: only with --model, not --agent")
+        agent = AgentCommandClient(
+            args.agent, work_dir=run_dir / "agent", timeout_s=args.agent_timeout, budget=budget
+        )
+        return RecordingClient(agent, run_dir / "transcript", domain=domain.name)
     if args.model:
-        inner = AnthropicClient(args.model, budget=budget)
+        inner: OpenAIClient | AnthropicClient
+        if args.model.startswith("openai:"):
+            if args.thinking is not None:
+                raise UsageError("--thinking is for Claude models; use --effort with openai:NAME")
+            inner = OpenAIClient(
+                args.model, base_url=args.base_url, budget=budget, price=price, effort=args.effort
+            )
+        else:
+            inner = AnthropicClient(
+                args.model.removeprefix("anthropic:"),
+                budget=budget,
+                base_url=args.base_url,
+                thinking_budget=args.thinking,
+                effort=args.effort,
+                price=price,
+            )
         return RecordingClient(inner, run_dir / "transcript", domain=domain.name)
+    if _model_options(args):
+        raise UsageError(f"{', '.join(_model_options(args))}: only with --model")
     replay = args.replay or domain.reference_transcript
     if not (Path(replay) / "meta.json").is_file():
         raise UsageError(
-            f"no transcript at {replay}: pass --replay DIR, or --model M with ANTHROPIC_API_KEY set"
+            f"no transcript at {replay}: pass --replay DIR, --model M (with ANTHROPIC_API_KEY "
+            "set) or --agent COMMAND"
         )
     return ReplayClient(Path(replay), strict=args.strict, budget=budget)
 
@@ -62,16 +114,28 @@ def _run_cli(argv: list[str]) -> int:
 def _author_on_ray(args: argparse.Namespace, domain: str, runs_root: Path) -> int:
     """`--runs N --ray ADDRESS`: each run is one Ray task running `rivet author --runs 1` on a
     node (which needs the project, Docker and the sandbox image; the key, if any, comes from
-    the node's own ANTHROPIC_API_KEY)."""
-    from rivet.scaleout import map_tasks
+    the node's own environment). `--max-usd X` gives each run X / N."""
+    from sim.scaleout import map_tasks
 
     source = (
         ["--model", args.model]
         if args.model
+        else ["--agent", args.agent, "--agent-timeout", str(args.agent_timeout)]
+        if args.agent
         else ["--replay", str(Path(args.replay).resolve())]
         if args.replay
         else []
     )
+    for flag, value in (
+        ("--base-url", args.base_url),
+        ("--thinking", args.thinking),
+        ("--effort", args.effort),
+        ("--price", args.price),
+    ):
+        if value is not None:
+            source += [flag, str(value)]
+    # each task enforces its share of the dollar budget, so that the runs together stay in it
+    share = None if args.max_usd is None else args.max_usd / args.runs
     argvs = []
     for k in range(args.runs):
         out = (runs_root / f"ray-{k + 1:03d}").resolve()
@@ -92,7 +156,7 @@ def _author_on_ray(args: argparse.Namespace, domain: str, runs_root: Path) -> in
                 "--sandbox",
                 args.sandbox,
             ]
-            + (["--max-usd", str(args.max_usd)] if args.max_usd is not None else [])
+            + (["--max-usd", repr(share)] if share is not None else [])
             + (["--max-calls", str(args.max_calls)] if args.max_calls is not None else [])
         )
     codes = map_tasks(args.ray, _run_cli, argvs)
@@ -104,53 +168,94 @@ def _author_on_ray(args: argparse.Namespace, domain: str, runs_root: Path) -> in
 
 
 def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool]) -> None:
-    from agent.errors import AgentError
+    from agent.clients import Budget
+    from agent.errors import AgentError, BudgetExceeded
     from agent.journal import Journal, latest_run_dir, new_run_dir
     from agent.loop import AuthoringRun
     from agent.prompt import templates_hash
     from agent.report import summary, write_report
     from artifacts import build_manifest, freeze
 
-    for i in range(args.runs):
-        run_dir = None
-        if args.resume:
-            run_dir = latest_run_dir(runs_root, domain.name)
-            if run_dir is None:
-                raise UsageError(f"--resume: no earlier run of {domain.name} under {runs_root}/")
-        run_dir = run_dir or new_run_dir(runs_root, domain.name)
-        print(f"run {i + 1}/{args.runs}: {run_dir}", file=sys.stderr)
-        journal = Journal(run_dir)
-        client = _client(args, domain, run_dir)
-        try:
-            frozen = AuthoringRun(
-                ctx=ctx, client=client, checker=checker, journal=journal, max_attempts=args.attempts
-            ).run()
-        except AgentError as e:
+    # One ledger for the whole invocation: --runs N shares it, --resume starts from the
+    # spending its journal holds.
+    ledger = Budget(max_usd=args.max_usd, max_calls=args.max_calls)
+    carried: set[Path] = set()
+    try:
+        for i in range(args.runs):
+            run_dir = None
+            if args.resume:
+                run_dir = latest_run_dir(runs_root, domain.name)
+                if run_dir is None:
+                    raise UsageError(
+                        f"--resume: no earlier run of {domain.name} under {runs_root}/"
+                    )
+            run_dir = run_dir or new_run_dir(runs_root, domain.name)
+            print(f"run {i + 1}/{args.runs}: {run_dir}", file=sys.stderr)
+            journal = Journal(run_dir)
+            if args.resume and run_dir not in carried:
+                carried.add(run_dir)
+                earlier = journal.state()
+                ledger.carry(earlier.spent_usd, earlier.calls)
+                if earlier.calls:
+                    print(
+                        f"resuming: this run has spent ${earlier.spent_usd:.2f} in "
+                        f"{earlier.calls} calls so far",
+                        file=sys.stderr,
+                    )
+            client = _client(args, domain, run_dir, ledger)
+            try:
+                try:
+                    frozen = AuthoringRun(
+                        ctx=ctx,
+                        client=client,
+                        checker=checker,
+                        journal=journal,
+                        max_attempts=args.attempts,
+                    ).run()
+                finally:
+                    _close(client)
+            except AgentError as e:
+                report = write_report(journal, f"RIVET authoring run — {domain.name}")
+                results.append(False)
+                if args.runs == 1:
+                    # the error itself is printed once, by the command line
+                    print(f"report: {report}", file=sys.stderr)
+                    raise
+                print(f"run {i + 1} failed: {e}\nreport: {report}", file=sys.stderr)
+                if isinstance(e, BudgetExceeded):
+                    print("the budget is spent: no further runs", file=sys.stderr)
+                    results.extend([False] * (args.runs - i - 1))
+                    break
+                continue
             report = write_report(journal, f"RIVET authoring run — {domain.name}")
-            print(f"authoring failed: {e}\nreport: {report}", file=sys.stderr)
-            results.append(False)
-            if args.runs == 1:
-                raise
-            continue
-        report = write_report(journal, f"RIVET authoring run — {domain.name}")
-        results.append(True)
-        if args.runs > 1:
-            continue  # reliability studies: keep each run's programs under runs/, freeze none
-        per_fn = summary(journal)
-        manifest = build_manifest(
-            domain.name,
-            frozen,
-            author=client.author.to_dict(),
-            prompt_hash=templates_hash(),
-            attempts={f: s["attempts"] for f, s in per_fn.items()},
-            checks={f: s["checks"] for f, s in per_fn.items()},
-        )
-        changed = freeze(
-            domain.name, frozen, manifest, Path(args.artifacts) if args.artifacts else None
-        )
-        state = "written" if changed else "unchanged"
-        print(f"artifacts/{domain.name}: {state}, set hash {manifest['set_hash']}")
-        print(f"report: {report}")
+            results.append(True)
+            if args.runs > 1:
+                continue  # reliability studies: keep each run's programs under runs/, freeze none
+            per_fn = summary(journal)
+            manifest = build_manifest(
+                domain.name,
+                frozen,
+                author=client.author.to_dict(),
+                prompt_hash=templates_hash(),
+                attempts={f: s["attempts"] for f, s in per_fn.items()},
+                checks={f: s["checks"] for f, s in per_fn.items()},
+            )
+            changed = freeze(
+                domain.name, frozen, manifest, Path(args.artifacts) if args.artifacts else None
+            )
+            state = "written" if changed else "unchanged"
+            print(f"artifacts/{domain.name}: {state}, set hash {manifest['set_hash']}")
+            print(f"report: {report}")
+    finally:
+        if ledger.calls and (args.model or args.agent):
+            limit = f" of --max-usd {ledger.max_usd:.2f}" if ledger.max_usd is not None else ""
+            print(f"spent ${ledger.spent_usd:.2f}{limit} in {ledger.calls} calls", file=sys.stderr)
+
+
+def _close(client) -> None:
+    close = getattr(client, "close", None)
+    if close is not None:
+        close()
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -161,9 +266,52 @@ def register(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument(
         "--model",
-        help="author with this Claude model (key from ANTHROPIC_API_KEY), e.g. claude-opus-5",
+        metavar="M",
+        help="author with this model: a Claude model (claude-opus-5; key from ANTHROPIC_API_KEY "
+        "or ANTHROPIC_AUTH_TOKEN) or openai:NAME for an OpenAI-compatible server (with --base-url)",
     )
     src.add_argument("--replay", type=Path, metavar="DIR", help="replay a transcript folder")
+    src.add_argument(
+        "--agent",
+        metavar="COMMAND",
+        help="author with an agent program: for each request it gets a folder with prompt.md "
+        "and the images, and writes response.md (docs/agent.md)",
+    )
+    p.add_argument(
+        "--agent-timeout",
+        type=float,
+        default=1800.0,
+        metavar="S",
+        help="--agent: seconds one request may take before the command is killed (default 1800)",
+    )
+    p.add_argument(
+        "--base-url",
+        default=None,
+        metavar="URL",
+        help="the API endpoint (default: ANTHROPIC_BASE_URL / OPENAI_BASE_URL, else the "
+        "provider's), e.g. http://localhost:8000/v1 for vLLM",
+    )
+    think = p.add_mutually_exclusive_group()
+    think.add_argument(
+        "--thinking",
+        type=int,
+        default=None,
+        metavar="BUDGET",
+        help="Claude: extended thinking with this many tokens (≥ 1024), added to max_tokens",
+    )
+    think.add_argument(
+        "--effort",
+        choices=("low", "medium", "high"),
+        default=None,
+        help="Claude: adaptive thinking at this effort; openai:NAME: reasoning_effort",
+    )
+    p.add_argument(
+        "--price",
+        default=None,
+        metavar="IN,OUT",
+        help="USD per million input, output tokens (needed for --max-usd with openai:NAME; "
+        "overrides the table for Claude)",
+    )
     p.add_argument(
         "--strict",
         action="store_true",
@@ -180,7 +328,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=None,
         metavar="X",
-        help="dollar budget, checked before each call",
+        help="dollar budget of this invocation (all --runs; --resume counts what the run spent), "
+        "checked before each call from its worst case",
     )
     p.add_argument("--max-calls", type=int, default=None, metavar="N", help="model-call budget")
     p.add_argument(
