@@ -4,17 +4,23 @@ Design rule: the programs run in a sandbox session of their own (`artifacts.runt
 the trial's process keeps the instance, the programs see only the two observations (with the
 calibrated camera), the meshes, and what they return to each other. The session stays open
 across trials, so the programs are loaded once per worker.
+
+Kinds: `oracle`, `artifacts [ROOT]`, `programs DIR`, and `run RUN_DIR`: the final programs of
+one authoring run (`RUN_DIR/frozen/`, as `rivet author` writes it). A reliability study
+(`rivet eval D --policy runs RUNS_DIR`) is one `run` policy per run that `find_runs` lists.
 """
 
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from artifacts.runtime import Runner, System, from_folder, load
 from contracts.errors import UsageError
 
-PolicySpec = tuple[str, str | None]  # ("oracle" | "programs" | "artifacts", folder or None)
+PolicySpec = tuple[str, str | None]  # ("oracle" | "programs" | "artifacts" | "run", folder or None)
 
 
 class ProgramPolicy:
@@ -67,9 +73,131 @@ def make_policy(domain: str, spec: PolicySpec, *, sandbox: str = "docker") -> An
 
         return OraclePolicy()
     if kind == "artifacts":
-        return ProgramPolicy(load(domain, Path(folder) if folder else None), "artifacts", sandbox=sandbox)
+        return ProgramPolicy(
+            load(domain, Path(folder) if folder else None), "artifacts", sandbox=sandbox
+        )
     if kind == "programs":
         if folder is None:
             raise UsageError("--policy programs needs a folder")
-        return ProgramPolicy(from_folder(domain, Path(folder)), f"programs {folder}", sandbox=sandbox)
-    raise UsageError(f"unknown policy {kind!r}; known: oracle, artifacts, programs DIR")
+        return ProgramPolicy(
+            from_folder(domain, Path(folder)), f"programs {folder}", sandbox=sandbox
+        )
+    if kind == "run":
+        if folder is None:
+            raise UsageError("policy 'run' needs an authoring run's folder")
+        programs = Path(folder) / "frozen"
+        return ProgramPolicy(from_folder(domain, programs), f"run {folder}", sandbox=sandbox)
+    if kind == "runs":
+        raise UsageError(
+            "'runs DIR' is a study, not one policy: `rivet eval DOMAIN --policy runs DIR` "
+            "evaluates each run under DIR with policy 'run RUN_DIR'"
+        )
+    raise UsageError(f"unknown policy {kind!r}; known: oracle, artifacts, programs DIR, run DIR")
+
+
+# --- authoring runs, for reliability studies ---------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AuthoringRunFolder:
+    """One folder of `rivet author D --runs N --runs-dir RUNS_DIR`: RUNS_DIR/D/<stamp>/.
+
+    Attributes:
+        name: the folder relative to the runs folder searched (e.g. `cubes/20260101-120000`).
+        finished: the run's journal says it finished and every function is in `frozen/`.
+        reason: why the run did not finish (None when it did).
+    """
+
+    name: str
+    path: Path
+    finished: bool
+    reason: str | None = None
+
+    @property
+    def policy(self) -> PolicySpec | None:
+        """The policy of the run's final programs (None: the run produced none)."""
+        return ("run", str(self.path)) if self.finished else None
+
+
+def find_runs(domain: str, runs_dir: Path) -> list[AuthoringRunFolder]:
+    """Every authoring run of `domain` under `runs_dir`, finished or not, in name order.
+
+    `runs_dir` is what `--runs-dir` was (its `<domain>/` holds the runs; with `--ray`, each
+    `ray-k/<domain>/` does), or that `<domain>/` folder itself. Every sub-folder there is a
+    run: one with no journal, or whose journal did not finish, is a failed run with the reason.
+    """
+    if not runs_dir.is_dir():
+        raise UsageError(f"--policy runs {runs_dir}: no such folder")
+    parents = [runs_dir / domain, *sorted(runs_dir.glob(f"*/{domain}"))]
+    if runs_dir.name == domain:
+        parents.append(runs_dir)
+    folders = sorted(
+        {
+            c
+            for parent in parents
+            if parent.is_dir()
+            for c in parent.iterdir()
+            if c.is_dir() and not c.name.startswith(".")
+        }
+    )
+    if not folders:
+        raise UsageError(
+            f"--policy runs {runs_dir}: no authoring runs of {domain} there (expected "
+            f"{runs_dir}/{domain}/<run>/, as `rivet author {domain} --runs N --runs-dir "
+            f"{runs_dir}` writes)"
+        )
+    return [_run_folder(domain, runs_dir, f) for f in folders]
+
+
+def _events(journal: Path) -> list[dict[str, Any]]:
+    out = []
+    for line in journal.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            break  # a torn last line (a run killed mid-write): what came before holds
+    return out
+
+
+def _run_folder(domain: str, runs_dir: Path, path: Path) -> AuthoringRunFolder:
+    from contracts.functions import FUNCTIONS
+
+    name = str(path.relative_to(runs_dir))
+
+    def failed(reason: str) -> AuthoringRunFolder:
+        return AuthoringRunFolder(name, path, False, reason)
+
+    journal = path / "journal.jsonl"
+    if not journal.is_file():
+        return failed("no journal.jsonl: the run never started")
+    events = _events(journal)
+    started = next((e for e in events if e.get("event") == "started"), None)
+    if started is not None:
+        other = started.get("config", {}).get("domain")
+        if other not in (None, domain):
+            return failed(f"a run of {other}, not {domain}")
+    frozen = [e["function"] for e in events if e.get("event") == "frozen"]
+    if not any(e.get("event") == "finished" for e in events):
+        last = events[-1] if events else {}
+        kind = last.get("event", "nothing")
+        at = (
+            f" {last['function']} attempt {last['attempt']}"
+            if "function" in last and "attempt" in last
+            else f" {last['function']}"
+            if "function" in last
+            else ""
+        )
+        if kind == "exhausted":
+            why = f"authoring exhausted: {last.get('function')} failed all {last.get('attempts')} attempts"
+        elif kind == "call_failed":
+            why = f"the model call for{at} failed: {str(last.get('error', ''))[:300]}"
+        elif kind == "refused":
+            why = f"the budget refused the call for{at}"
+        else:
+            why = f"did not finish (killed?): the journal ends with '{kind}'{at}"
+        done = ", ".join(frozen) if frozen else "none"
+        return failed(f"{why} (frozen: {done})")
+    missing = [f for f in FUNCTIONS if not (path / "frozen" / f"{f}.py").is_file()]
+    if missing:
+        return failed(f"finished, but frozen/ lacks {', '.join(f + '.py' for f in missing)}")
+    return AuthoringRunFolder(name, path, True)

@@ -45,6 +45,63 @@ def _json(text: str | None) -> dict[str, Any]:
         return {}
 
 
+EVAL_COMMAND = "rivet eval {domain} --policy artifacts"
+"""What writes `artifacts/<domain>/eval.json`: the whole dev benchmark, front camera, honest
+protocol, on the frozen set (see rivet/commands/eval.py), run from the repository root."""
+
+
+def _unmeasured(manifest: dict[str, Any], evaluation: dict[str, Any]) -> str | None:
+    """Why `evaluation` does not measure `manifest`'s set (None: it does)."""
+    if not evaluation:
+        return "no `eval.json`"
+    measured = evaluation.get("set_hash")
+    if not isinstance(measured, str):
+        return "`eval.json` names no set hash"
+    if measured != manifest.get("set_hash"):
+        return f"`eval.json` measured set `{measured[:16]}`, not this one"
+    return None
+
+
+def _metrics(
+    domain: str, rev: str, before: tuple[dict, dict], after: tuple[dict, dict]
+) -> list[str]:
+    """The metrics table: each side's figures only when its eval.json measured its set."""
+    command = EVAL_COMMAND.format(domain=domain)
+    cells: list[dict[str, str]] = []
+    notes: list[str] = []
+    for label, where, (manifest, evaluation) in (
+        ("Before", f"at `{rev}`", before),
+        ("After", "in the working tree", after),
+    ):
+        if not manifest:  # no set on this side: nothing to measure
+            cells.append({k: "–" for k in (*METRICS, "trials")})
+            continue
+        why = _unmeasured(manifest, evaluation)
+        if why is None:
+            pct = lambda v: "–" if v is None else f"{100 * v:.1f}%"  # noqa: E731
+            cells.append(
+                {k: pct(evaluation.get(k)) for k in METRICS}
+                | {"trials": str(evaluation.get("trials", "–"))}
+            )
+            continue
+        cells.append({k: "not evaluated" for k in (*METRICS, "trials")})
+        run = (
+            f"run `{command}` (it writes `artifacts/{domain}/eval.json`)"
+            if label == "After"
+            else f"on a checkout of `{rev}`, run `{command}`"
+        )
+        notes.append(
+            f"{label} (set `{str(manifest.get('set_hash'))[:16]}` {where}): **not evaluated** — "
+            f"{why}. To measure it, {run}."
+        )
+    out = ["", "| metric | before | after |", "|---|---|---|"]
+    for k in (*METRICS, "trials"):
+        out.append(f"| {k} | {cells[0][k]} | {cells[1][k]} |")
+    if notes:
+        out += [""] + [f"- {n}" for n in notes]
+    return out
+
+
 def diff_markdown(domain: str, rev: str = "HEAD", repo: Path = REPO) -> str:
     """Markdown comparing `<repo>/artifacts/<domain>/` at git `rev` with the working tree."""
     if not _rev_exists(repo, rev):
@@ -88,12 +145,7 @@ def diff_markdown(domain: str, rev: str = "HEAD", repo: Path = REPO) -> str:
         )
     old_e = _json(_git_show(repo, rev, f"{rel}/eval.json"))
     new_e = _json(_read(root / domain / "eval.json"))
-    if old_e or new_e:
-        out += ["", "| metric | before | after |", "|---|---|---|"]
-        for k in METRICS:
-            a, b = old_e.get(k), new_e.get(k)
-            fmt = lambda v: "–" if v is None else f"{100 * v:.1f}%"  # noqa: E731
-            out.append(f"| {k} | {fmt(a)} | {fmt(b)} |")
+    out += _metrics(domain, rev, (old_m, old_e), (new_m, new_e))
     for f in changed:
         before = (_git_show(repo, rev, f"{rel}/{f}.py") or "").splitlines(keepends=True)
         after = (_read(root / domain / f"{f}.py") or "").splitlines(keepends=True)

@@ -2,6 +2,12 @@
 
 Writes are atomic: the new set is written to a sibling temporary folder and swapped in with
 renames, so a crash leaves either the old set or the new one, never a mix.
+
+`eval.json` (the metrics `rivet eval DOMAIN --policy artifacts` writes, stamped with the set
+hash it measured) never outlives its set under that name: freezing a different set moves it
+aside to `eval.stale.json`, so the new set reads as not evaluated until it is. Should the new
+set be one that `eval.stale.json` measured (a set frozen again after a revert), that file
+becomes `eval.json` again.
 """
 
 from __future__ import annotations
@@ -20,6 +26,8 @@ from contracts import ContractError, validate
 from contracts.functions import FUNCTIONS, dependencies
 
 ROOT = REPO / "artifacts"
+EVAL = "eval.json"  # the metrics of the set in this folder, stamped with its set hash
+STALE_EVAL = "eval.stale.json"  # metrics of an earlier set, moved aside by `freeze`
 
 
 def domain_dir(domain: str, root: Path | None = None) -> Path:
@@ -80,12 +88,15 @@ def freeze(
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{domain}.new-"))
     try:
-        if target.is_dir():  # keep files that are not part of the set (eval.json, README, …)
+        if target.is_dir():  # keep files that are not part of the set (README, …)
             for p in target.iterdir():
                 if p.is_file() and p.name not in {f"{n}.py" for n in FUNCTIONS} | {
-                    "manifest.json"
+                    "manifest.json",
+                    EVAL,
+                    STALE_EVAL,
                 }:
                     shutil.copy2(p, tmp / p.name)
+            _carry_eval(target, tmp, manifest["set_hash"])
         for name in FUNCTIONS:
             (tmp / f"{name}.py").write_text(sources[name], encoding="utf-8")
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
@@ -103,6 +114,32 @@ def freeze(
         if tmp.exists():
             shutil.rmtree(tmp)
     return True
+
+
+def eval_set_hash(path: Path) -> str | None:
+    """The set hash an eval.json says it measured (None: no file, unreadable, or unstamped)."""
+    try:
+        value = json.loads(path.read_text()).get("set_hash")
+    except (OSError, json.JSONDecodeError, AttributeError):
+        return None
+    return value if isinstance(value, str) else None
+
+
+def _carry_eval(old: Path, new: Path, set_hash: str) -> None:
+    """Into the new set's folder: as `eval.json` only metrics that measured `set_hash`; the
+    latest metrics of another set as `eval.stale.json`."""
+    current, stale = old / EVAL, old / STALE_EVAL
+    if stale.is_file() and eval_set_hash(stale) == set_hash and eval_set_hash(current) != set_hash:
+        current, stale = stale, current  # freezing again a set measured before: restore it
+    if current.is_file():
+        if eval_set_hash(current) == set_hash:
+            shutil.copy2(current, new / EVAL)
+            if stale.is_file():
+                shutil.copy2(stale, new / STALE_EVAL)
+        else:
+            shutil.copy2(current, new / STALE_EVAL)
+    elif stale.is_file():
+        shutil.copy2(stale, new / STALE_EVAL)
 
 
 def verify(domain: str, root: Path | None = None) -> tuple[dict[str, Any], dict[str, str]]:

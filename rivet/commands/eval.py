@@ -3,7 +3,9 @@ simulated FR3 + 2F-85, score — and print the metrics, timings and every failur
 
 Policies: `oracle` (ground truth + the generator's construction order: the executor alone),
 `programs DIR` (render/perceive/relate/plan .py files in DIR), `artifacts` (the frozen,
-hash-checked programs of artifacts/DOMAIN). Trials come from the fixed benchmark set
+hash-checked programs of artifacts/DOMAIN), `runs RUNS_DIR` (a reliability study: each
+authoring run's final programs under RUNS_DIR on the first `--pairs K` pairs, per run and
+pooled; sim/reliability.py). Trials come from the fixed benchmark set
 (20 goals × 3 starts) unless `--seed` or `--instances` says otherwise.
 """
 
@@ -21,10 +23,11 @@ VIEWS = ("front", "view1", "view2")
 def _policy(values: list[str]) -> tuple[str, str | None]:
     if values == ["oracle"] or values == ["artifacts"]:
         return values[0], None
-    if len(values) == 2 and values[0] in ("programs", "artifacts"):
+    if len(values) == 2 and values[0] in ("programs", "artifacts", "runs"):
         return values[0], values[1]
     raise UsageError(
-        f"--policy must be 'oracle', 'programs DIR' or 'artifacts'; got {' '.join(values)!r}"
+        "--policy must be 'oracle', 'programs DIR', 'artifacts' or 'runs RUNS_DIR'; "
+        f"got {' '.join(values)!r}"
     )
 
 
@@ -128,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
     from sim.evaluation import PAPER, write_json
     from sim.trials import HONEST
 
+    if _policy(args.policy)[0] == "runs" or args.pairs is not None:
+        from rivet.commands._study import run_study_command
+
+        return run_study_command(args)
     names = domains.names() if args.all else [domains.load(args.domain).name]
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
@@ -151,7 +158,9 @@ def run(args: argparse.Namespace) -> int:
             if "front" in results[name]:
                 front = results[name]["front"]
                 front["views"] = {v: results[name][v]["final_sr"] for v in results[name]}
-                write_json(front, Path("artifacts") / name / "eval.json")
+                root = Path(_policy(args.policy)[1] or "artifacts") / name
+                write_json(front, root / "eval.json")
+                (root / "eval.stale.json").unlink(missing_ok=True)  # superseded
     if args.all and all("front" in results[n] and "view1" in results[n] for n in names):
         print("\nTable I (front camera) — ours vs paper")
         print(f"  {'domain':<10} {'state_ac':>16} {'plan_sr':>16} {'final_sr':>16}")
@@ -188,9 +197,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=["artifacts"],
         metavar="POLICY",
-        help="oracle | programs DIR | artifacts (default)",
+        help="oracle | programs DIR | artifacts (default) | runs RUNS_DIR",
     )
     p.add_argument("--trials", type=int, default=None, metavar="N", help="run the first N trials")
+    p.add_argument(
+        "--pairs",
+        type=int,
+        default=None,
+        metavar="K",
+        help="--policy runs: each run on the first K start/goal pairs of --split (default 6)",
+    )
     p.add_argument(
         "--view",
         choices=(*VIEWS, "all"),

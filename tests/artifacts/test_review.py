@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 
 import pytest
@@ -22,9 +23,12 @@ def repo(tmp_path):
     git(tmp_path, "init", "-q")
     git(tmp_path, "config", "user.email", "t@example.com")
     git(tmp_path, "config", "user.name", "t")
-    freeze("toy", SOURCES, build_manifest("toy", SOURCES, author=AUTHOR), tmp_path / "artifacts")
+    manifest = build_manifest("toy", SOURCES, author=AUTHOR)
+    freeze("toy", SOURCES, manifest, tmp_path / "artifacts")
     (tmp_path / "artifacts" / "toy" / "eval.json").write_text(
-        '{"state_ac": 0.9, "plan_sr": 1.0, "final_sr": 0.85}'
+        json.dumps(
+            {"set_hash": manifest["set_hash"], "state_ac": 0.9, "plan_sr": 1.0, "final_sr": 0.85}
+        )
     )
     git(tmp_path, "add", "-A")
     git(tmp_path, "commit", "-qm", "base")
@@ -39,9 +43,12 @@ def test_unchanged_set(repo):
 
 def test_changed_function_shows_its_diff_and_metrics(repo):
     changed = {**SOURCES, "plan": SOURCES["plan"].replace("'ok'", "'ok'  # explicit")}
-    freeze("toy", changed, build_manifest("toy", changed, author=AUTHOR), repo / "artifacts")
-    (repo / "artifacts" / "toy" / "eval.json").write_text(
-        '{"state_ac": 0.95, "plan_sr": 1.0, "final_sr": 0.9}'
+    manifest = build_manifest("toy", changed, author=AUTHOR)
+    freeze("toy", changed, manifest, repo / "artifacts")
+    (repo / "artifacts" / "toy" / "eval.json").write_text(  # metrics stamped with the new set
+        json.dumps(
+            {"set_hash": manifest["set_hash"], "state_ac": 0.95, "plan_sr": 1.0, "final_sr": 0.9}
+        )
     )
     md = diff_markdown("toy", "HEAD", repo)
     assert "**Set hash changed**" in md
