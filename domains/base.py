@@ -8,11 +8,14 @@ A domain lives in its own folder beside its module (dm_control style):
     cameras.json     the default RGB-D camera `front` and the alternatives `view1`, `view2`
     tolerances.json  the scoring tolerances
     meshes/          OBJ files written by `make_meshes.py`
-    benchmark/       the fixed benchmark set: goalGG_startS.json, 20 goals × 3 starts
+    benchmark/       the fixed benchmark sets: goalGG_startS.json (dev split) and
+                     test/goalGG_startS.json (test split), 20 goals × 3 starts each
 
-Subclasses provide `make_goal` and `make_start`; the base class turns them into instances
-with a construction order, rejecting draws that are not physically valid or whose order the
-robot cannot execute (a step without a top-down grasp of the 2F-85).
+Subclasses provide `make_goal` and `make_start` for both splits (`split="dev"`: the goal and
+start families programs are developed on; `"test"`: families the dev split never uses, see
+docs/domains.md, "Splits"); the base class turns them into instances with a construction
+order, rejecting draws that are not physically valid or whose order the robot cannot execute
+(a step without a top-down grasp of the 2F-85).
 """
 
 from __future__ import annotations
@@ -29,7 +32,13 @@ import numpy as np
 import trimesh
 
 from domains import _meshing, symmetry
-from domains.benchmark import BENCHMARK_GOALS, BENCHMARK_STARTS, benchmark_name
+from domains.benchmark import (
+    BENCHMARK_GOALS,
+    BENCHMARK_STARTS,
+    SPLIT_SEEDS,
+    benchmark_name,
+    check_split,
+)
 from domains.catalogue import CameraSpec, MeshSpec, ObjectSpec, Tolerance
 from domains.errors import DomainError, UnknownObjectError
 from domains.generation import PhysicsCheck, draw_instance
@@ -193,13 +202,18 @@ class Domain:
 
     # -- generation ----------------------------------------------------------------------
 
-    def make_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
-        """Goal records. `index` is the benchmark goal number (1 = the authoring reference),
-        or None for a free draw."""
+    def make_goal(
+        self, rng: np.random.Generator, index: int | None, split: str = "dev"
+    ) -> list[dict]:
+        """Goal records. `index` is the benchmark goal number (1 = the authoring reference in
+        the dev split), or None for a free draw; `split` picks the goal families (the test
+        split's never appear in the dev split)."""
         raise NotImplementedError
 
-    def make_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
-        """Start records for a goal."""
+    def make_start(
+        self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
+    ) -> list[dict]:
+        """Start records for a goal (`split`: the dev or the test split's starts)."""
         raise NotImplementedError
 
     @cached_property
@@ -234,46 +248,65 @@ class Domain:
         return {"domain": self.name, "objects": [dict(r) for r in records]}
 
     def generate(
-        self, seed: int, *, physics: PhysicsCheck | None = None, grasps: bool | None = None
+        self,
+        seed: int,
+        *,
+        physics: PhysicsCheck | None = None,
+        grasps: bool | None = None,
+        split: str = "dev",
     ) -> Instance:
         """A free draw: goal and start both from `seed`.
 
         Args:
+            split: "dev" (the default: the instances this has always drawn, named
+                ``seedS``) or "test" (the test split's goal and start families, from other
+                seed keys, named ``test/seedS``).
             physics: also reject scenes this says are not physically valid (e.g.
                 `sim.settle.physical_problems`: they do not settle in MuJoCo); None: geometry
                 only (workspace, height, interpenetration).
             grasps: make the order executable by the robot (every step has a 2F-85 grasp,
                 `geometry.hand`); None: when `physics` is given.
         """
+        dev = check_split(split) == "dev"
         return draw_instance(
             self,
-            name=f"seed{seed}",
+            name=f"seed{seed}" if dev else f"{split}/seed{seed}",
             seed=seed,
-            goal_key=(seed, 0),
+            goal_key=(seed, 0) if dev else (seed, 2),
             goal_index=None,
-            start_key=(seed, 1),
+            start_key=(seed, 1) if dev else (seed, 3),
             physics=physics,
             grasps=physics is not None if grasps is None else grasps,
+            split=split,
         )
 
     def benchmark_instance(
-        self, goal: int, start: int, *, physics: PhysicsCheck | None = None, grasps: bool | None = None
+        self,
+        goal: int,
+        start: int,
+        *,
+        physics: PhysicsCheck | None = None,
+        grasps: bool | None = None,
+        split: str = "dev",
     ) -> Instance:
-        """Benchmark instance `goal` (1–20, 1 = reference) × `start` (1–3), regenerated
-        (`physics`, `grasps`: as for `generate`)."""
+        """Benchmark instance `goal` (1–20; 1 = the reference in the dev split) × `start`
+        (1–3) of `split` ("dev" or "test"), regenerated (`physics`, `grasps`: as for
+        `generate`)."""
         if not (1 <= goal <= BENCHMARK_GOALS and 1 <= start <= BENCHMARK_STARTS):
             raise ValueError(
                 f"benchmark has goals 1–{BENCHMARK_GOALS}, starts 1–{BENCHMARK_STARTS}"
             )
+        key = SPLIT_SEEDS[check_split(split)]
         return draw_instance(
             self,
-            name=benchmark_name(goal, start),
+            name=benchmark_name(goal, start, split),
             seed=None,
-            goal_key=(10_000, goal),
+            goal_key=(key, goal),
             goal_index=goal,
-            start_key=(10_000, goal, start),
+            start_key=(key, goal, start),
             physics=physics,
             grasps=physics is not None if grasps is None else grasps,
+            split=split,
         )
 
     @property
@@ -285,19 +318,25 @@ class Domain:
 
     @property
     def benchmark_dir(self) -> Path:
+        """The dev split's benchmark folder (`benchmark_dir_of(split)` for either split)."""
         return self.root / "benchmark"
 
-    def benchmark(self) -> list[Instance]:
-        """The committed benchmark set, goal-major order (goal01_start1, goal01_start2, …)."""
-        paths = sorted(self.benchmark_dir.glob("goal*_start*.json"))
+    def benchmark_dir_of(self, split: str = "dev") -> Path:
+        """The folder of a split's benchmark files: benchmark/ (dev), benchmark/test/ (test)."""
+        return self.benchmark_dir if check_split(split) == "dev" else self.benchmark_dir / split
+
+    def benchmark(self, split: str = "dev") -> list[Instance]:
+        """The committed benchmark set of `split`, goal-major order (goal01_start1,
+        goal01_start2, …)."""
+        paths = sorted(self.benchmark_dir_of(split).glob("goal*_start*.json"))
         if len(paths) != BENCHMARK_GOALS * BENCHMARK_STARTS:
+            flag = "" if split == "dev" else f" --split {split}"
             raise DomainError(
-                f"{self.name}: benchmark has {len(paths)} files, expected "
-                f"{BENCHMARK_GOALS * BENCHMARK_STARTS}; run `rivet scene benchmark {self.name}`"
+                f"{self.name}: {split} benchmark has {len(paths)} files, expected "
+                f"{BENCHMARK_GOALS * BENCHMARK_STARTS}; run "
+                f"`rivet scene benchmark {self.name}{flag}`"
             )
         return [Instance.from_dict(json.loads(p.read_text())) for p in paths]
 
-    def benchmark_path(self, goal: int, start: int) -> Path:
-        return self.benchmark_dir / f"{benchmark_name(goal, start)}.json"
-
-
+    def benchmark_path(self, goal: int, start: int, split: str = "dev") -> Path:
+        return self.benchmark_dir / f"{benchmark_name(goal, start, split)}.json"

@@ -1,16 +1,22 @@
-"""A domain's fixed benchmark set (20 goals × 3 starts): names, the file format, regeneration.
+"""A domain's fixed benchmark sets (20 goals × 3 starts each): splits, names, the file
+format, regeneration.
 
-Generation is deterministic: goal g is drawn from the seed (10000, g), its starts from
-(10000, g, s); goal 1 is the domain's hand-authored reference. The files are written and
-verified with `rivet scene benchmark DOMAIN [--check]` (which settles every scene in MuJoCo).
+Two splits (`SPLITS`): `dev`, the set programs are written and improved against, and `test`,
+drawn from goal families the dev split never uses (its figures are reported, never tuned
+on; docs/domains.md, "Splits"). Generation is deterministic: goal g of a split is drawn from
+the seed (K, g), its starts from (K, g, s), K = `SPLIT_SEEDS[split]` (10000 dev, 20000 test);
+dev goal 1 is the domain's hand-authored reference. Dev files are
+`benchmark/goalGG_startS.json`, test files `benchmark/test/goalGG_startS.json` (instance
+names `goalGG_startS` and `test/goalGG_startS`). They are written and verified with
+`rivet scene benchmark DOMAIN [--split dev|test] [--check]` (which settles every scene in
+MuJoCo).
 """
 
 from __future__ import annotations
 
 import json
 import re
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,9 +24,12 @@ from domains.instance import Instance
 
 if TYPE_CHECKING:
     from domains.base import Domain
+    from domains.generation import PhysicsCheck
 
 BENCHMARK_GOALS = 20
 BENCHMARK_STARTS = 3
+SPLITS = ("dev", "test")
+SPLIT_SEEDS = {"dev": 10_000, "test": 20_000}  # the first seed key of a split's instances
 
 _NUMBERS = re.compile(r"\[\s*(-?[\d.e+-]+(?:,\s*-?[\d.e+-]+)*)\s*\]")
 
@@ -34,25 +43,39 @@ def dumps(value: dict) -> str:
     return text + "\n"
 
 
-def benchmark_name(goal: int, start: int) -> str:
-    return f"goal{goal:02d}_start{start}"
+def check_split(split: str) -> str:
+    """`split` if it is one of `SPLITS` (ValueError otherwise)."""
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; known: {', '.join(SPLITS)}")
+    return split
+
+
+def benchmark_name(goal: int, start: int, split: str = "dev") -> str:
+    """``goal01_start2`` (dev) or ``test/goal01_start2`` (test): also the file's path below
+    the domain's benchmark folder, without ``.json``."""
+    name = f"goal{goal:02d}_start{start}"
+    return name if check_split(split) == "dev" else f"{split}/{name}"
 
 
 _NAME = re.compile(r"^goal(\d\d)_start(\d)$")
 
 
 def parse_benchmark_name(name: str) -> tuple[int, int] | None:
-    """(goal, start) of a name like ``goal01_start2``, else None."""
+    """(goal, start) of a dev name like ``goal01_start2``, else None."""
     m = _NAME.match(name)
     return (int(m.group(1)), int(m.group(2))) if m else None
 
 
-def regenerate(domain: Domain, physics: Callable[[Any, dict], list] | None) -> list[Instance]:
-    """Every benchmark instance drawn again (`physics`: see `Domain.generate`)."""
+def benchmark_keys() -> list[tuple[int, int]]:
+    """(goal, start) of every benchmark instance, goal-major."""
+    return [(g, s) for g in range(1, BENCHMARK_GOALS + 1) for s in range(1, BENCHMARK_STARTS + 1)]
+
+
+def regenerate(domain: Domain, physics: PhysicsCheck | None, split: str = "dev") -> list[Instance]:
+    """Every benchmark instance of `split` drawn again (`physics`: see `Domain.generate`)."""
     return [
-        domain.benchmark_instance(g, s, physics=physics, grasps=True)
-        for g in range(1, BENCHMARK_GOALS + 1)
-        for s in range(1, BENCHMARK_STARTS + 1)
+        domain.benchmark_instance(g, s, physics=physics, grasps=True, split=split)
+        for g, s in benchmark_keys()
     ]
 
 

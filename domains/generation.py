@@ -90,8 +90,10 @@ def draw_instance(
     start_key: tuple,
     physics: PhysicsCheck | None,
     grasps: bool,
+    split: str = "dev",
 ) -> Instance:
-    """The first valid goal and start drawn from the keys, with their construction order.
+    """The first valid goal and start drawn from the keys, with their construction order
+    (`split`: which of the domain's goal and start families, "dev" or "test").
 
     Raises:
         GenerationError: no valid goal or start within `ATTEMPTS` draws.
@@ -107,7 +109,9 @@ def draw_instance(
         return found
 
     for attempt in range(ATTEMPTS):
-        goal = domain.make_goal(np.random.default_rng([*goal_key, attempt]), goal_index)
+        goal = domain.make_goal(
+            np.random.default_rng([*goal_key, attempt]), goal_index, split=split
+        )
         goal_problems = invalid(goal)
         if not goal_problems:
             break
@@ -116,7 +120,7 @@ def draw_instance(
         raise GenerationError(f"{domain.name} {name}: no valid goal; " + "; ".join(problems[-3:]))
     for attempt in range(ATTEMPTS):
         rng = np.random.default_rng([*start_key, attempt])
-        start = domain.make_start(rng, goal)
+        start = domain.make_start(rng, goal, split=split)
         start_problems = invalid(start)
         if start_problems:
             problems.append(f"start draw {attempt}: {start_problems[0]}")

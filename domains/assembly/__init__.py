@@ -1,9 +1,17 @@
 """The 3D assembly domain: pillars, beam, arch, roof, cylinder, L-block and block built into
-bridges, gates, towers and houses whose parts support and hide each other."""
+bridges, gates, towers and houses whose parts support and hide each other.
+
+Two splits (docs/domains.md, "Splits"): the dev split draws the 20 goals of `GOALS` (five
+main structures, a top, a second structure) from starts with at most two small parts
+stacked; the test split draws the 20 goals of `TEST_GOALS`, built on main structures no dev
+goal has (pillars standing on the arch, a part standing between the pillars, a four-part
+tower, a five-deep support chain, a block under the arch, the L-block buttressing a
+pillar), from starts of stacked clutter close together, one stack on the goal's site.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -130,12 +138,20 @@ class Assembly(Domain):
     on_gap = 0.008
     adjacent_gap = 0.005
 
-    def make_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
+    def make_goal(
+        self, rng: np.random.Generator, index: int | None, split: str = "dev"
+    ) -> list[dict]:
+        if split == "test":
+            return _retry(lambda: self._goal(rng, index, split))
+        return self._goal(rng, index, split)
+
+    def _goal(self, rng: np.random.Generator, index: int | None, split: str) -> list[dict]:
+        goals = TEST_GOALS if split == "test" else GOALS
         if index is None:
-            main, top, second = GOALS[int(rng.integers(len(GOALS)))]
+            main, top, second = goals[int(rng.integers(len(goals)))]
         else:
-            main, top, second = GOALS[(index - 1) % len(GOALS)]
-        members = _main(main, top)
+            main, top, second = goals[(index - 1) % len(goals)]
+        members = _test_main(main, top) if split == "test" else _main(main, top)
         used = {i for i, _ in members}
         extra = _second(second) if second else []
         if any(i in used for i, _ in extra):
@@ -145,7 +161,8 @@ class Assembly(Domain):
             units.append(_unit(extra))
             used |= {i for i, _ in extra}
         units += [_unit([(i, np.eye(4))]) for i in MESH if i not in used]
-        if index == 1:  # the reference: the main structure centred, facing the front camera
+        if index == 1 and split == "dev":  # the reference: the main structure centred,
+            # facing the front camera
             pose = yaw_pose(0.52, 0.0, 0.0, np.pi / 2)
             first = _layout.records(units[0], pose)
             placed = [place(r["id"], self.parts[r["mesh"]], r["pose"]) for r in first]
@@ -155,7 +172,11 @@ class Assembly(Domain):
         yaws = (np.pi / 2 - 0.5, np.pi / 2 + 0.5)
         return _layout.scatter(rng, units, self.parts, self.placement, clearance=0.04, yaws=yaws)
 
-    def make_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
+    def make_start(
+        self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
+    ) -> list[dict]:
+        if split == "test":
+            return _retry(lambda: self._test_start(rng, goal))
         # every part starts upright, as the goal uses it; some start stacked on others
         free = [str(i) for i in rng.permutation(list(MESH))]
         units: list[Unit] = []
@@ -178,6 +199,136 @@ class Assembly(Domain):
         units += [_unit([(i, np.eye(4))]) for i in free]
         return _layout.scatter(rng, units, self.parts, self.placement, clearance=0.03)
 
+    def _test_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
+        """Stacked clutter: a stack of three and one or two pairs (every part upright, in the
+        goal's resting pose), the first stack standing where a goal part stands on the
+        table, the units 15 mm apart (`_retry` draws again when they do not fit)."""
+        free = [str(i) for i in rng.permutation(list(MESH))]
+        triple = TEST_STACKS[int(rng.integers(len(TEST_STACKS)))]
+        units = [_stack(triple)]
+        free = [i for i in free if i not in triple]
+        for _ in range(int(rng.integers(1, 3))):
+            pairs = [(b, t) for b, t in STACKS if b in free and t in free]
+            if not pairs:
+                break
+            pair = pairs[int(rng.integers(len(pairs)))]
+            units.append(_stack(pair))
+            free = [i for i in free if i not in pair]
+        units += [_unit([(i, np.eye(4))]) for i in free]
+        # the first stack on the site of a goal part that stands on the table
+        pose = {r["id"]: np.asarray(r["pose"], float) for r in goal}
+        ground = sorted(i for i, T in pose.items() if T[2, 3] < 1e-6)
+        site = pose[ground[int(rng.integers(len(ground)))]]
+        x, y = site[:2, 3] + rng.uniform(-0.01, 0.01, 2)
+        first = _layout.records(
+            units[0], yaw_pose(float(x), float(y), 0.0, rng.uniform(-np.pi, np.pi))
+        )
+        placed = [place(r["id"], self.parts[r["mesh"]], r["pose"]) for r in first]
+        if not all(self.placement.contains(b.xy()) for b in placed):
+            raise GenerationError("the first start stack leaves the placement region")
+        return first + _layout.scatter(
+            rng,
+            units[1:],
+            self.parts,
+            self.placement,
+            placed=placed,
+            clearance=TEST_START_CLEARANCE,
+        )
+
+
+# -- the test split -----------------------------------------------------------------------
+
+BUTTRESS_GAP = 0.002  # between the L-block's leg and the pillar it buttresses [m] (clearly
+# `adjacent`, 5 mm)
+# pillar centres on the arch's top: over its legs, 1 mm in from its ends (at ±45 mm a
+# pillar's inner face would lie exactly on a seam between the arch's convex parts) [m]
+PILLARS_ON_ARCH = 0.044
+
+
+def _test_main(kind: str, top: str | None) -> list[tuple[str, np.ndarray]]:
+    """A test main structure (none of them is part of any dev goal)."""
+    if kind == "tiered":  # the pillars standing on the arch, carrying the beam
+        m = [
+            ("arch", _at(0, 0)),
+            ("pillar_1", _at(-PILLARS_ON_ARCH, ARCH_H)),
+            ("pillar_2", _at(PILLARS_ON_ARCH, ARCH_H)),
+            ("beam", _at(0, ARCH_H + PILLAR[2])),
+        ]
+        z = ARCH_H + PILLAR[2] + BEAM[2]
+    elif kind in ("core", "bench"):  # a portal with the cylinder (block) between its pillars
+        m = [*_main("portal", None), ("cylinder" if kind == "core" else "block", _at(0, 0))]
+        z = PILLAR[2] + BEAM[2]
+    elif kind == "tower":  # pillar, block, pillar, cylinder: 250 mm, four deep
+        m = [
+            ("pillar_1", _at(0, 0)),
+            ("block", _at(0, PILLAR[2])),
+            ("pillar_2", _at(0, PILLAR[2] + BLOCK[2])),
+            ("cylinder", _at(0, 2 * PILLAR[2] + BLOCK[2])),
+        ]
+        z = 2 * PILLAR[2] + BLOCK[2] + CYL_H
+    elif kind == "beacon":  # the portal carrying the cylinder, the block and the roof
+        m = [
+            *_main("portal", None),
+            ("cylinder", _at(0, PILLAR[2] + BEAM[2])),
+            ("block", _at(0, PILLAR[2] + BEAM[2] + CYL_H)),
+            ("roof", _at(0, PILLAR[2] + BEAM[2] + CYL_H + BLOCK[2])),
+        ]
+        z = None
+    elif kind == "shelter":  # the block under the arch, across it (11 mm from the opening's
+        # sides), the beam across the arch
+        m = [("block", _at(0, 0, np.pi / 2)), ("arch", _at(0, 0)), ("beam", _at(0, ARCH_H))]
+        z = ARCH_H + BEAM[2]
+    elif kind == "buttress":  # an arch bridge, the L-block's leg 2 mm beside pillar_2
+        # (the arch ends flush with the pillar, 10 mm above the leg), the cylinder on its foot
+        x = PILLARS_FOR_ARCH + PILLAR[0] / 2 + BUTTRESS_GAP + L_FOOT[0] / 2
+        m = [
+            *_main("arch_bridge", None),
+            ("lblock", _at(x, 0)),
+            ("cylinder", _at(x + 0.02, L_FOOT[1])),
+        ]
+        z = PILLAR[2] + ARCH_H
+    else:
+        raise ValueError(kind)
+    if top is not None:
+        if z is None:
+            raise ValueError(f"{kind} takes no top")
+        m.append((top, _at(0, z, np.pi / 2 if top == "block" else 0.0)))
+    return m
+
+
+# Test goals: (main, top, second), main one of `_test_main`'s kinds, second one of the dev
+# seconds (`_second`) or None; the other parts stand beside. Test goal k is TEST_GOALS[k - 1].
+TEST_GOALS: tuple[tuple[str, str | None, str | None], ...] = (
+    ("tiered", "roof", "step"),
+    ("core", "roof", "step_block"),
+    ("tower", None, None),
+    ("beacon", None, None),
+    ("shelter", "roof", "step"),
+    ("buttress", "roof", None),
+    ("tiered", "block", "step"),
+    ("bench", "roof", "step"),
+    ("tower", None, None),
+    ("beacon", None, None),
+    ("shelter", "cylinder", None),
+    ("buttress", "block", None),
+    ("tiered", None, "post"),
+    ("core", "block", None),
+    ("tiered", "cylinder", "step_block"),
+    ("bench", "cylinder", None),
+    ("shelter", None, "step"),
+    ("buttress", None, None),
+    ("tiered", "roof", "lamp"),
+    ("core", None, "step_block"),
+)
+# Test starts: stacks of three (bottom to top) besides the dev split's pairs (`STACKS`).
+TEST_STACKS = (
+    ("beam", "block", "cylinder"),
+    ("arch", "block", "cylinder"),
+    ("lblock", "block", "cylinder"),
+    ("beam", "arch", "cylinder"),
+)
+TEST_START_CLEARANCE = 0.015  # between start units in the test split [m] (dev: 0.03)
+
 
 # Start stacks (base, top): small parts left on a flat top.
 STACKS = (
@@ -191,6 +342,31 @@ STACKS = (
     ("lblock", "cylinder"),
     ("pillar_1", "block"),
 )
+
+
+def _retry(make: Callable[[], list[dict]], tries: int = 20) -> list[dict]:
+    """`make()` again (its random generator moves on) while it finds no free place."""
+    for _ in range(tries - 1):
+        try:
+            return make()
+        except GenerationError:
+            pass
+    return make()
+
+
+def _stack(ids: Sequence[str]) -> Unit:
+    """Parts stacked bottom to top, each centred on the flat top below (on the L-block's
+    foot, the block across it as in `step_block`)."""
+    members, z, x = [], 0.0, 0.0
+    for k, i in enumerate(ids):
+        below = ids[k - 1] if k else None
+        if below is not None and MESH[below] == "lblock":
+            x, z = 0.0175, L_FOOT[1]
+        elif below is not None:
+            z += _top(below)
+        yaw = np.pi / 2 if (MESH[i], below and MESH[below]) == ("block", "lblock") else 0.0
+        members.append((i, _at(x, z, yaw)))
+    return _unit(members)
 
 
 def _unit(members: Sequence[tuple[str, np.ndarray]]) -> Unit:

@@ -1,8 +1,15 @@
-"""The cubes domain: six coloured 40 mm cubes built into stacks, towers, pyramids and rows."""
+"""The cubes domain: six coloured 40 mm cubes built into stacks, towers, pyramids and rows.
+
+Two splits of goals and starts (docs/domains.md, "Splits"): the dev split draws the
+compositions of `COMPOSITIONS` (linear structures standing 50 mm apart); the test split
+draws the families of `TEST_FAMILIES` — rows that meet (a cube with neighbours on two, three
+or four sides), towers side by side, towers bridged — that no dev composition contains, and
+starts every cube in tall stacks of clutter close together, one squatting on a goal spot.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +17,7 @@ import numpy as np
 from domains import _layout
 from domains._layout import Unit, unit
 from domains.base import Domain
+from domains.errors import GenerationError
 from domains.registry import register
 from geometry import bodies_of, place, yaw_pose
 from geometry import resting_on as supports
@@ -43,6 +51,44 @@ COMPOSITIONS: tuple[tuple[tuple[str, int], ...], ...] = (
 )
 
 
+# Test goal families: cells (i, j, level) of a 6-cube structure on the 46 mm grid (half
+# integers i: a cube bridging two below, as in a pyramid), each family with variants (where
+# the sixth cube stands). Test goal k uses TEST_FAMILIES[(k - 1) % 7], a variant and a
+# mirror image drawn from its seed.
+TEST_FAMILIES: dict[str, tuple[tuple[tuple[float, float, int], ...], ...]] = {
+    # two rows of three meeting at a corner cube (neighbours on two sides), a cube on top
+    "ell": (
+        ((0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (0, 2, 0), (0, 0, 1)),
+        ((0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (0, 2, 0), (2, 0, 1)),
+    ),
+    # a row of three with a row of two against its middle (neighbours on three sides)
+    "tee": (
+        ((0, 0, 0), (1, 0, 0), (2, 0, 0), (1, 1, 0), (1, 2, 0), (1, 0, 1)),
+        ((0, 0, 0), (1, 0, 0), (2, 0, 0), (1, 1, 0), (1, 2, 0), (1, 2, 1)),
+    ),
+    # two rows of three crossing at their middle (neighbours on four sides)
+    "plus": (
+        ((1, 1, 0), (0, 1, 0), (2, 1, 0), (1, 0, 0), (1, 2, 0), (1, 1, 1)),
+        ((1, 1, 0), (0, 1, 0), (2, 1, 0), (1, 0, 0), (1, 2, 0), (2, 1, 1)),
+    ),
+    # three towers of two standing in an L (the corner tower has neighbours on two sides at
+    # both levels)
+    "corner": (((0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1), (0, 1, 0), (0, 1, 1)),),
+    # two towers of two bridged by a cube carrying a cube: support four deep, on two towers
+    "gate": (((0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1), (0.5, 0, 2), (0.5, 0, 3)),),
+    # a stack of four on a 2-1 pyramid's top: support five deep, 200 mm tall
+    "spire": (((0, 0, 0), (1, 0, 0), (0.5, 0, 1), (0.5, 0, 2), (0.5, 0, 3), (0.5, 0, 4)),),
+    # towers of three, two and one in a row: a staircase, the middle tower between two
+    "stairs": (
+        ((0, 0, 0), (0, 0, 1), (0, 0, 2), (1, 0, 0), (1, 0, 1), (2, 0, 0)),
+        ((0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1), (1, 0, 2), (2, 0, 0)),
+    ),
+}
+# Test starts: every cube in a stack, of these heights (random order inside a stack).
+TEST_START_STACKS = ((3, 3), (4, 2), (3, 2, 1), (4, 1, 1), (5, 1))
+TEST_START_CLEARANCE = 0.012  # between start stacks in the test split [m] (dev: 0.03)
+
+
 def _at(x: float, y: float, z: float) -> np.ndarray:
     return yaw_pose(x, y, z, 0.0)
 
@@ -68,6 +114,18 @@ def structure(kind: str, ids: Sequence[str]) -> Unit:
     raise ValueError(f"unknown structure {kind!r}")
 
 
+def cells_structure(cells: Sequence[tuple[float, float, int]], ids: Sequence[str]) -> Unit:
+    """A structure of grid cells (i, j, level) [46 mm, 46 mm, 40 mm], centred in its frame."""
+    c = np.asarray(cells, float)
+    mid = (c[:, :2].min(axis=0) + c[:, :2].max(axis=0)) / 2
+    return unit(
+        *(
+            (i, "cube", _at((x - mid[0]) * PITCH, (y - mid[1]) * PITCH, SIDE / 2 + SIDE * lv))
+            for i, (x, y, lv) in zip(ids, cells, strict=True)
+        )
+    )
+
+
 @register("cubes")
 class Cubes(Domain):
     name = "cubes"
@@ -90,7 +148,11 @@ class Cubes(Domain):
         "perceive": [("physically_valid", {"penetration": 0.003, "contact": 0.004})],
     }
 
-    def make_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
+    def make_goal(
+        self, rng: np.random.Generator, index: int | None, split: str = "dev"
+    ) -> list[dict]:
+        if split == "test":
+            return _retry(lambda: self._test_goal(rng, index))
         if index == 1:  # the authoring reference: a 3-2-1 pyramid facing the camera
             u = structure("pyramid", COLOURS)
             return _layout.records(u, yaw_pose(0.5, 0.0, 0.0, np.pi / 2))
@@ -107,7 +169,27 @@ class Cubes(Domain):
             rng, units, self.parts, self.placement, clearance=0.05, yaws=(-np.pi / 2, np.pi / 2)
         )
 
-    def make_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
+    def _test_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
+        names = list(TEST_FAMILIES)
+        if index is None:
+            family = names[int(rng.integers(len(names)))]
+        else:
+            family = names[(index - 1) % len(names)]
+        variants = TEST_FAMILIES[family]
+        cells = variants[int(rng.integers(len(variants)))]
+        if rng.random() < 0.5:  # the mirror image
+            cells = tuple((i, -j, lv) for i, j, lv in cells)
+        ids = [str(i) for i in rng.permutation(COLOURS)]
+        u = cells_structure(cells, ids)
+        return _layout.scatter(
+            rng, [u], self.parts, self.placement, clearance=0.05, yaws=(-np.pi / 2, np.pi / 2)
+        )
+
+    def make_start(
+        self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
+    ) -> list[dict]:
+        if split == "test":
+            return _retry(lambda: self._test_start(rng, goal))
         pose = {r["id"]: np.asarray(r["pose"]) for r in goal}
         sup = supports(bodies_of(goal, self.parts))
         free = [str(i) for i in rng.permutation(COLOURS)]
@@ -158,6 +240,45 @@ class Cubes(Domain):
         units += [structure("stack", [i]) for i in free]
         placed = [place(f["id"], self.parts["cube"], f["pose"]) for f in fixed]
         return fixed + _layout.scatter(rng, units, self.parts, self.placement, placed=placed)
+
+    def _test_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
+        """Stacked clutter: every cube in a stack (one of three or more), the first stack
+        standing on the goal spot of a cube on the table, the others close around."""
+        pose = {r["id"]: np.asarray(r["pose"]) for r in goal}
+        sup = supports(bodies_of(goal, self.parts))
+        ids = [str(i) for i in rng.permutation(COLOURS)]
+        sizes = TEST_START_STACKS[int(rng.integers(len(TEST_START_STACKS)))]
+        stacks, k = [], 0
+        for n in sizes:
+            stacks.append(ids[k : k + n])
+            k += n
+        ground = [i for i in COLOURS if not sup[i]]
+        spot = ground[int(rng.integers(len(ground)))]
+        x, y = pose[spot][:2, 3] + rng.uniform(-0.01, 0.01, 2)
+        first = _layout.records(
+            structure("stack", stacks[0]),
+            yaw_pose(float(x), float(y), 0.0, rng.uniform(-np.pi, np.pi)),
+        )
+        placed = [place(f["id"], self.parts["cube"], f["pose"]) for f in first]
+        rest = [structure("stack", s) for s in stacks[1:]]
+        return first + _layout.scatter(
+            rng,
+            rest,
+            self.parts,
+            self.placement,
+            placed=placed,
+            clearance=TEST_START_CLEARANCE,
+        )
+
+
+def _retry(make: Callable[[], list[dict]], tries: int = 20) -> list[dict]:
+    """`make()` again (its random generator moves on) while it finds no free place."""
+    for _ in range(tries - 1):
+        try:
+            return make()
+        except GenerationError:
+            pass
+    return make()
 
 
 def _columns(sup: Mapping[str, set[str]]) -> list[list[str]]:

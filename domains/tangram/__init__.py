@@ -1,9 +1,17 @@
-"""The tangram domain: seven knobbed pieces packed edge to edge into named figures."""
+"""The tangram domain: seven knobbed pieces packed edge to edge into named figures.
+
+Two splits (docs/domains.md, "Splits"): the dev split draws the 30 figures of figures.json
+(the benchmark the first 20), upright ±20°, from starts with the pieces 20 mm apart; the
+test split draws the 20 figures of test_figures.json (outlines no dev figure has: a compact
+family drawn upright and a spread-out family drawn turned 34–180° away from upright), from
+starts where every piece must turn far, the pieces lie 8 mm apart and two to four of them
+lie inside the figure's area.
+"""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
 
@@ -14,11 +22,23 @@ from domains.base import Domain
 from domains.errors import GenerationError
 from domains.registry import register
 from domains.tangram.figures import OBJECTS, UNIT
-from geometry import Workspace, place, yaw_pose
+from geometry import Body, Workspace, place, yaw_of, yaw_pose
 
 # Benchmark goal k uses the k-th figure (goal 1, the reference, is the square); free draws
-# use any figure.
+# use any figure. Test goal k uses the k-th test figure; free test draws any test figure.
 BENCHMARK_FIGURES = 20
+# Test starts: the least and most turn [rad] from a piece's start to its goal, modulo the
+# piece's symmetry (triangles none, parallelogram a half turn, square a quarter turn), and
+# the gap between start pieces [m] (dev: any turn, 20 mm).
+TEST_TURNS = {
+    "large_triangle": (2 * np.pi / 3, np.pi),
+    "medium_triangle": (2 * np.pi / 3, np.pi),
+    "small_triangle": (2 * np.pi / 3, np.pi),
+    "parallelogram": (np.pi / 3, np.pi / 2),
+    "square": (np.pi / 6, np.pi / 4),
+}
+TEST_START_CLEARANCE = 0.008
+TEST_TURNED = (0.6, np.pi)  # a turned figure's heading away from upright [rad] (dev ≤ 0.35)
 
 
 @register("tangram")
@@ -38,9 +58,15 @@ class Tangram(Domain):
         """Figure name → {"silhouette", "centre", "pieces": {id: {"rotation_45", "centroid"}}}."""
         return json.loads((self.root / "figures.json").read_text())
 
+    @cached_property
+    def test_figures(self) -> dict[str, dict]:
+        """The test split's figures, as `figures` plus each one's "family"."""
+        return json.loads((self.root / "test_figures.json").read_text())
+
     def figure_records(self, name: str, pose: np.ndarray) -> list[dict]:
-        """The figure `name` built at `pose` (the figure's centre, on the table)."""
-        fig = self.figures[name]
+        """The figure `name` (a dev or a test figure) built at `pose` (the figure's centre,
+        on the table)."""
+        fig = self.figures[name] if name in self.figures else self.test_figures[name]
         centre = np.asarray(fig["centre"], float)
         out = []
         for oid, p in fig["pieces"].items():
@@ -49,7 +75,11 @@ class Tangram(Domain):
             out.append({"id": oid, "mesh": OBJECTS[oid], "pose": pose @ local})
         return sorted(out, key=lambda r: list(OBJECTS).index(r["id"]))
 
-    def make_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
+    def make_goal(
+        self, rng: np.random.Generator, index: int | None, split: str = "dev"
+    ) -> list[dict]:
+        if split == "test":
+            return self._test_goal(rng, index)
         names = list(self.figures)
         if index is not None:
             name = names[(index - 1) % BENCHMARK_FIGURES]
@@ -70,7 +100,32 @@ class Tangram(Domain):
                 return recs
         raise GenerationError(f"figure {name!r} does not fit the workspace")
 
-    def make_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
+    def _test_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
+        names = list(self.test_figures)
+        if index is not None:
+            name = names[(index - 1) % len(names)]
+        else:
+            name = names[int(rng.integers(len(names)))]
+        turned = self.test_figures[name]["family"] == "limbs"
+        for _ in range(200):
+            x, y = rng.uniform(0.42, 0.58), rng.uniform(-0.12, 0.12)
+            if turned:
+                away = rng.choice([-1.0, 1.0]) * rng.uniform(*TEST_TURNED)
+            else:
+                away = rng.uniform(-0.35, 0.35)
+            recs = self.figure_records(name, yaw_pose(x, y, 0.0, np.pi / 2 + away))
+            if all(
+                self.placement.contains(place(r["id"], self.parts[r["mesh"]], r["pose"]).xy())
+                for r in recs
+            ):
+                return recs
+        raise GenerationError(f"figure {name!r} does not fit the workspace")
+
+    def make_start(
+        self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
+    ) -> list[dict]:
+        if split == "test":
+            return _retry(lambda: self._test_start(rng, goal))
         ids = [str(i) for i in rng.permutation(list(OBJECTS))]
         inside = int(rng.choice([0, 1, 2, 3], p=[0.3, 0.3, 0.25, 0.15]))
         xy = np.concatenate([place(r["id"], self.parts[r["mesh"]], r["pose"]).xy() for r in goal])
@@ -87,3 +142,44 @@ class Tangram(Domain):
         return placed + _layout.scatter(
             rng, units[inside:], self.parts, self.placement, placed=bodies, clearance=0.02
         )
+
+    def _test_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
+        """Every piece turned far from its goal heading, the pieces 8 mm apart, two to four
+        of them inside the figure's area."""
+        yaw = {r["id"]: yaw_of(np.asarray(r["pose"], float)) for r in goal}
+        ids = [str(i) for i in rng.permutation(list(OBJECTS))]
+        inside = int(rng.integers(2, 5))
+        xy = np.concatenate([place(r["id"], self.parts[r["mesh"]], r["pose"]).xy() for r in goal])
+        area = Workspace(
+            x=(float(xy[:, 0].min()), float(xy[:, 0].max())),
+            y=(float(xy[:, 1].min()), float(xy[:, 1].max())),
+            reach=self.placement.reach,
+        )
+        out: list[dict] = []
+        bodies: list[Body] = []
+        for k, i in enumerate(ids):
+            lo, hi = TEST_TURNS[OBJECTS[i]]
+            turn = rng.choice([-1.0, 1.0]) * np.array([lo, hi])
+            recs = _layout.scatter(
+                rng,
+                [_layout.unit((i, OBJECTS[i], np.eye(4)))],
+                self.parts,
+                self.placement,
+                placed=bodies,
+                clearance=TEST_START_CLEARANCE,
+                yaws=tuple(sorted(yaw[i] + turn)),
+                area=area if k < inside else None,
+            )
+            out += recs
+            bodies += [place(r["id"], self.parts[r["mesh"]], r["pose"]) for r in recs]
+        return out
+
+
+def _retry(make: Callable[[], list[dict]], tries: int = 20) -> list[dict]:
+    """`make()` again (its random generator moves on) while it finds no free place."""
+    for _ in range(tries - 1):
+        try:
+            return make()
+        except GenerationError:
+            pass
+    return make()

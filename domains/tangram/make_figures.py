@@ -1,22 +1,24 @@
-"""Solve every tangram silhouette and write `figures.json`: `python -m domains.tangram.make_figures`."""
+"""Solve every tangram silhouette and write `figures.json` (the dev split's figures) and
+`test_figures.json` (the test split's): `python -m domains.tangram.make_figures`."""
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 
 import numpy as np
 
 from domains.benchmark import dumps
-from domains.tangram.figures import HERE, SILHOUETTES, solve
+from domains.tangram.figures import HERE, SILHOUETTES, TEST_FAMILIES, TEST_SILHOUETTES, solve
 
 
-def main() -> int:
+def tile(silhouettes: Mapping[str, list], family: Mapping[str, str] | None = None) -> dict | None:
     out = {}
-    for name, polys in SILHOUETTES.items():
+    for name, polys in silhouettes.items():
         tiling = solve(polys)
         if tiling is None:
             print(f"{name}: no tiling with the seven pieces", file=sys.stderr)
-            return 1
+            return None
         allp = np.concatenate([np.asarray(p, float) for p in polys])
         centre = (allp.min(axis=0) + allp.max(axis=0)) / 2
         out[name] = {
@@ -24,8 +26,20 @@ def main() -> int:
             "centre": [float(v) for v in centre],
             "pieces": {i: {"rotation_45": k, "centroid": c} for i, (k, c) in tiling.items()},
         }
+        if family is not None:
+            out[name]["family"] = family[name]
         print(f"{name}: tiled")
-    (HERE / "figures.json").write_text(dumps(out))
+    return out
+
+
+def main() -> int:
+    dev = tile(SILHOUETTES)
+    family = {n: f for f, names in TEST_FAMILIES.items() for n in names}
+    test = tile(TEST_SILHOUETTES, family)
+    if dev is None or test is None:
+        return 1
+    (HERE / "figures.json").write_text(dumps(dev))
+    (HERE / "test_figures.json").write_text(dumps(test))
     return 0
 
 

@@ -6,8 +6,10 @@
     rivet scene show INSTANCE.json --out SHEET.png [--camera NAME|FILE.json ...]
                      [--realism LEVEL ...] [--side start|goal|both] [--seed S]
                      [--tile-width W] [--crop X,Y,W,H] [--colors N]
+    rivet scene benchmark DOMAIN [--split dev|test] [--check]
 
-INSTANCE.json may also be a benchmark name such as ``cubes/goal01_start1``. Instances are
+INSTANCE.json may also be a benchmark name such as ``cubes/goal01_start1`` (a test split
+instance: ``cubes/test/goal01_start1``). Instances are
 checked before use: malformed or physically invalid ones (interpenetrating, outside the
 workspace, not at rest) are refused with exit code 2 and a message naming the object.
 
@@ -166,26 +168,34 @@ def show(args: argparse.Namespace) -> int:
 
 
 def benchmark(args: argparse.Namespace) -> int:
-    """Write (or with --check verify) a domain's benchmark files, every scene settled in
-    MuJoCo and every order executable by the robot."""
+    """Write (or with --check verify) a domain's benchmark files of one split, every scene
+    settled in MuJoCo and every order executable by the robot."""
     import json
+    import time
 
     import domains
-    from domains.benchmark import dumps, regenerate, same
+    from domains.benchmark import benchmark_keys, dumps, same
     from sim.settle import physical_problems
 
     domain = domains.load(args.domain)
-    domain.benchmark_dir.mkdir(exist_ok=True)
+    folder = domain.benchmark_dir_of(args.split)
+    if not args.check:
+        folder.mkdir(parents=True, exist_ok=True)
     differ = []
-    for inst in regenerate(domain, physics=physical_problems):
-        path = domain.benchmark_dir / f"{inst.name}.json"
+    for g, s in benchmark_keys():
+        t0 = time.perf_counter()
+        inst = domain.benchmark_instance(
+            g, s, physics=physical_problems, grasps=True, split=args.split
+        )
+        path = domain.benchmark_path(g, s, args.split)
         value = inst.to_dict()
         if args.check:
             if not path.exists() or not same(json.loads(path.read_text()), value):
                 differ.append(inst.name)
         else:
             path.write_text(dumps(value))
-            print(f"{path}: {len(inst.order)} steps")
+            took = time.perf_counter() - t0
+            print(f"{path}: {len(inst.order)} steps ({took:.1f} s)", flush=True)
     if differ:
         print(f"{args.domain}: regenerated instances differ: {', '.join(differ)}", file=sys.stderr)
         return 1
@@ -259,9 +269,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.set_defaults(handler=show)
 
     b = scene_sub.add_parser(
-        "benchmark", help="write or verify (--check) a domain's benchmark files (20 goals × 3 starts)"
+        "benchmark",
+        help="write or verify (--check) a domain's benchmark files (20 goals × 3 starts)",
+        description=(
+            "Write (or with --check compare) the benchmark files of one split: dev in "
+            "domains/DOMAIN/benchmark/, test in domains/DOMAIN/benchmark/test/ (goal "
+            "families the dev split never uses; docs/domains.md, Splits)."
+        ),
     )
     b.add_argument("domain", metavar="DOMAIN")
+    b.add_argument(
+        "--split",
+        choices=("dev", "test"),
+        default="dev",
+        help="which split (default: dev, the set programs are developed on)",
+    )
     b.add_argument("--check", action="store_true", help="compare with the files instead of writing")
     b.set_defaults(handler=benchmark)
 
