@@ -292,18 +292,15 @@ def boxes_hit_triangles(
     p = np.einsum("nk,nk->n", n, v[:, 0])
     r = np.abs(n) @ half
     sep = np.abs(p) > r
-    # Nine edge × axis cross products.
-    zero = np.zeros(len(e))
-    for i in range(3):
-        ex, ey, ez = e[:, i, 0], e[:, i, 1], e[:, i, 2]
-        for a in (  # e × x, e × y, e × z
-            np.stack([zero, ez, -ey], axis=1),
-            np.stack([-ez, zero, ex], axis=1),
-            np.stack([ey, -ex, zero], axis=1),
-        ):
-            proj = np.einsum("nk,nvk->nv", a, v)
-            r = np.abs(a) @ half
-            sep |= (proj.min(axis=1) > r) | (proj.max(axis=1) < -r)
+    # Nine edge × axis cross products, all at once: a[n, i, j] = e_i × (box axis j).
+    ex, ey, ez = e[..., 0], e[..., 1], e[..., 2]  # (n, 3)
+    a = np.zeros((len(e), 3, 3, 3))
+    a[:, :, 0, 1], a[:, :, 0, 2] = ez, -ey
+    a[:, :, 1, 0], a[:, :, 1, 2] = -ez, ex
+    a[:, :, 2, 0], a[:, :, 2, 1] = ey, -ex
+    proj = np.einsum("nijk,nvk->nijv", a, v)  # (n, 3, 3, 3 vertices)
+    r = np.abs(a) @ half  # (n, 3, 3)
+    sep |= ((proj.min(axis=3) > r) | (proj.max(axis=3) < -r)).any(axis=(1, 2))
     return bool((~sep).any())
 
 
@@ -331,12 +328,14 @@ class _Triangles:
     tris: np.ndarray  # (n, 3, 3)
     lo: np.ndarray  # (3,)
     hi: np.ndarray  # (3,)
+    tri_lo: np.ndarray  # (n, 3) per triangle
+    tri_hi: np.ndarray  # (n, 3)
 
     @classmethod
     def of(cls, mesh: trimesh.Trimesh, pose: np.ndarray) -> _Triangles:
         tris = _world_triangles(mesh, pose)
-        flat = tris.reshape(-1, 3)
-        return cls(tris, flat.min(axis=0), flat.max(axis=0))
+        tri_lo, tri_hi = tris.min(axis=1), tris.max(axis=1)
+        return cls(tris, tri_lo.min(axis=0), tri_hi.max(axis=0), tri_lo, tri_hi)
 
 
 @functools.lru_cache(maxsize=4096)
@@ -363,7 +362,9 @@ def _gripper_hits(
     for t in triangle_sets:
         near = np.flatnonzero(np.all((c + extent >= t.lo) & (c - extent <= t.hi), axis=1))
         for b in near:
-            if boxes_hit_triangles(c[b], halves[b], R, t.tris):
+            lo, hi = c[b] - extent[b], c[b] + extent[b]
+            close = np.all((t.tri_hi >= lo) & (t.tri_lo <= hi), axis=1)
+            if close.any() and boxes_hit_triangles(c[b], halves[b], R, t.tris[close]):
                 return True
     return False
 
@@ -388,7 +389,34 @@ class _FacePair:
     contact_area: float
 
 
+_PAIRS: dict[Any, tuple[trimesh.Trimesh, list[_FacePair], dict[str, int]]] = {}
+_PAIRS_MAX = 4096
+
+
 def _face_pairs(
+    mesh: trimesh.Trimesh,
+    T_pick: np.ndarray,
+    max_width: float,
+    fingers: FingerModel,
+    table: GripperStroke,
+    rejected: dict[str, int],
+) -> list[_FacePair]:
+    """The face pairs the jaws may take and where, for the mesh at `T_pick` (cached on the
+    mesh and the pose: a planner asks about the same object where it lies many times)."""
+    key = (id(mesh), _pose_key(T_pick), max_width, fingers, id(table))
+    got = _PAIRS.get(key)
+    if got is None or got[0] is not mesh:
+        why: dict[str, int] = {}
+        got = (mesh, _find_face_pairs(mesh, T_pick, max_width, fingers, table, why), why)
+        if len(_PAIRS) >= _PAIRS_MAX:
+            _PAIRS.clear()
+        _PAIRS[key] = got  # the mesh is kept with it, so its id is not reused meanwhile
+    for k, n in got[2].items():
+        rejected[k] = rejected.get(k, 0) + n
+    return got[1]
+
+
+def _find_face_pairs(
     mesh: trimesh.Trimesh,
     T_pick: np.ndarray,
     max_width: float,
@@ -799,6 +827,7 @@ class MoveCheck:
         self.parts = pieces
         self.margins = margins
         self._cache: dict[Any, MoveVerdict] = {}
+        self._sweeps: dict[Any, Body] = {}
         self._xy: dict[str, np.ndarray] = {
             k: np.asarray(m.vertices)[:, :2] for k, m in meshes.items()
         }
@@ -868,17 +897,39 @@ class MoveCheck:
     def _above(self, mesh: str, T: np.ndarray, near: tuple, pool: Mapping) -> list[str]:
         """Neighbours in the vertical sweep of the object's convex parts above pose `T`."""
         touch = TOLERANCES.sweep_touch
-        sweep = []
-        for p in place("", self.parts[mesh], T).pieces:
-            v = p.vertices
-            sweep.append(Piece.of(np.vstack([v, v + UP])))
-        swept = Body(id="", pieces=tuple(sweep))
+        lo, hi = self._box(mesh, T)
+        swept: Body | None = None
         out = []
         for j, m, _ in near:
+            lo_j, hi_j = self._box(m, pool[j][1])
+            # a neighbour beside the object's outline, or wholly below it, is not above it
+            if np.any(lo_j[:2] > hi[:2] + touch) or np.any(hi_j[:2] < lo[:2] - touch):
+                continue
+            if hi_j[2] < lo[2]:
+                continue
+            if swept is None:
+                swept = self._sweep(mesh, T)
             body = place(j, self.parts[m], pool[j][1])
             if body_separation(swept, body, cutoff=touch)[0] < -touch:
                 out.append(j)
         return out
+
+    def _box(self, mesh: str, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World axis-aligned bounds (lo, hi) of the mesh at `T`."""
+        v = np.asarray(self.meshes[mesh].vertices) @ T[:3, :3].T + T[:3, 3]
+        return v.min(axis=0), v.max(axis=0)
+
+    def _sweep(self, mesh: str, T: np.ndarray) -> Body:
+        """The object's convex parts at `T` swept straight up (cached on the pose)."""
+        key = (mesh, _pose_key(T))
+        got = self._sweeps.get(key)
+        if got is None:
+            pieces = []
+            for p in place("", self.parts[mesh], T).pieces:
+                v = p.vertices
+                pieces.append(Piece.of(np.vstack([v, v + UP])))
+            got = self._sweeps[key] = Body(id="", pieces=tuple(pieces))
+        return got
 
     def _plan(self, oid, mesh, T_from, T_to, others, place_others, key) -> MoveVerdict:
         for where, T, near, pool in (

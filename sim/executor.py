@@ -312,7 +312,15 @@ class Executor:
         rel = sensor.estimate(oid)
         if rel is None:
             return None
-        if np.linalg.norm(rel[:3, 3] - se3.inverse(grasp.T_object_tcp)[:3, 3]) > 0.03:
+        # A symmetric object's pose is known only up to its symmetry, and the frame the sensor
+        # reports need not be the one the robot's belief (perception) used to plan the grasp:
+        # take the equivalent frame closest to the one the grasp expects (continuity)
+        expected = se3.inverse(grasp.T_object_tcp)
+        rel = min(
+            (rel @ S for S in self.symmetries[oid]),
+            key=lambda X: se3.rotation_angle(expected[:3, :3].T @ X[:3, :3]),
+        )
+        if np.linalg.norm(rel[:3, 3] - expected[:3, 3]) > 0.03:
             raise _StepAbort("dropped", "transfer", "the object left the hand", grasp)
         return rel
 

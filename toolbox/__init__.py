@@ -55,7 +55,16 @@ from toolbox.registration import (
     register_mesh_to_segment,
 )
 from toolbox.render import compare_renders, overlay_mask, render_scene
-from toolbox.robot import MAX_OPENING, WORKSPACE, Grasp, GraspReport, Hand, MoveVerdict, Workspace
+from toolbox.robot import (
+    JAW_CLEARANCES,
+    MAX_OPENING,
+    WORKSPACE,
+    Grasp,
+    GraspReport,
+    Hand,
+    MoveVerdict,
+    Workspace,
+)
 from toolbox.search import SearchResult, astar, bfs, state_key
 from toolbox.segmentation import (
     Region,
@@ -91,6 +100,7 @@ from toolbox.vision import (
 )
 
 __all__ = [
+    "JAW_CLEARANCES",
     "MAX_OPENING",
     "WORKSPACE",
     "Grasp",

@@ -17,7 +17,10 @@ about the vertical, lowers it straight down onto the target and opens. So a step
 - both ends inside `WORKSPACE`, every point of the object (the arm reaches them top-down).
 
 `Hand(meshes, symmetries).can_move(...)` answers all of this but the arm's joint limits (the
-checks add an IK test). Records are ``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
+checks add an IK test). `MAX_OPENING` is the widest the jaws open; for the approach and the
+release they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or
+`JAW_CLEARANCES[1]` when a neighbour is too close for that (`toolbox.finger_footprints` draws
+the open fingers from above for such an opening). Records are ``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
 """
 
 from __future__ import annotations
@@ -28,10 +31,11 @@ from typing import Any
 import numpy as np
 
 from geometry import STROKE, WORKSPACE, GraspReport, MoveVerdict, Shape, Workspace
-from geometry.hand import Grasp, MoveCheck, Obstacle, plan_grasps
+from geometry.hand import FingerModel, Grasp, MoveCheck, Obstacle, plan_grasps
 from toolbox.errors import ToolboxError
 
 __all__ = [
+    "JAW_CLEARANCES",
     "MAX_OPENING",
     "WORKSPACE",
     "Grasp",
@@ -42,6 +46,7 @@ __all__ = [
 ]
 
 MAX_OPENING = STROKE.max_gap  # [m] widest the 2F-85's jaws open
+JAW_CLEARANCES = FingerModel().clearances  # [m] per side, beyond the gripped width
 
 
 class Hand:
