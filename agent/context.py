@@ -1,4 +1,5 @@
-"""What the prompts say about a domain: task text, cameras, meshes, reference images."""
+"""What the prompts say about a domain: task text, what the checks and the robot use, the rules
+of every check, cameras, meshes, reference images."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from agent.clients.base import ImageBlock
-from agent.prompt import DomainContext
+from agent.prompt import DomainContext, template
 
 
 def png_bytes(image: np.ndarray) -> bytes:
@@ -84,6 +85,28 @@ def reference_observations(domain) -> list[tuple[str, dict]]:
     ]
 
 
+def domain_facts(domain) -> str:
+    """The generated domain section (`agent/prompts/facts.md`): tolerances, the reference
+    relations, what perceive reports, the workspace and placement region, the robot, the time
+    budgets — every number read from where it is defined (`checks.rules`)."""
+    from checks.rules import render
+
+    text, _ = render(template("facts.md"), domain=domain)
+    paragraphs = [p.strip() for p in text.split("\n\n") if p.strip()]
+    return "\n\n".join(p if p.startswith("#") else " ".join(p.split()) for p in paragraphs)
+
+
+def function_rules(domain) -> dict[str, str]:
+    """Per function, the rule of every check its drafts get (the domain's properties
+    included), as a Markdown list."""
+    from checks.rules import rules_for
+    from contracts.functions import FUNCTIONS
+
+    return {
+        f: "\n".join(f"- `{s.check}`: {s.text}" for s in rules_for(domain, f)) for f in FUNCTIONS
+    }
+
+
 def build_context(
     domain, observations: Sequence[tuple[str, dict]] = (), toolbox_docs: str = ""
 ) -> DomainContext:
@@ -105,4 +128,6 @@ def build_context(
         meshes=mesh_summary(domain),
         images=tuple(images),
         toolbox_docs=toolbox_docs,
+        facts=domain_facts(domain),
+        rules=function_rules(domain),
     )

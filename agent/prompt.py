@@ -2,14 +2,19 @@
 
 Layout (the stable prefix first, so it is cached across all calls of a run):
 system: rules + representation + toolbox documentation            ← cache mark
-user:   domain context (task, cameras, meshes) + reference images  ← cache mark
-        the function's task + frozen sources of its dependencies
+user:   domain context (task, what the checks and the robot use,
+        cameras, meshes) + reference images                        ← cache mark
+        the function's task + what its draft is checked for (every rule of its checks)
+        + frozen sources of its dependencies
         [repair: previous draft + check report + its images]
+
+`python -m agent.prompt --sizes` prints each prompt's size (`sizes`).
 """
 
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from string import Template
@@ -28,6 +33,10 @@ class DomainContext:
     meshes: str  # mesh summary (Markdown)
     images: tuple[ImageBlock, ...] = ()
     toolbox_docs: str = ""
+    # what the checks and the robot use (Markdown, `agent.context.domain_facts`)
+    facts: str = ""
+    # function → the rule of every check its drafts get (Markdown, `agent.context.function_rules`)
+    rules: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,6 +83,7 @@ def build_request(
     context = Template(template("context.md")).substitute(
         domain=ctx.domain,
         task=ctx.task.strip(),
+        facts=("\n\n" + ctx.facts.strip()) if ctx.facts.strip() else "",
         cameras=ctx.cameras.strip(),
         meshes=ctx.meshes.strip(),
     )
@@ -86,6 +96,10 @@ def build_request(
 
     task = [template(f"{function}.md").strip()]
     task.append(f"Signature: `{SIGNATURES[function]}`")
+    if ctx.rules.get(function):
+        task.append(
+            Template(template("checks.md")).substitute(rules=ctx.rules[function].strip()).strip()
+        )
     for dep in CODE_DEPS[function]:
         task.append(
             f"## Frozen `{dep}` (already checked; importable as `from {dep} import {dep}`)"
@@ -116,3 +130,99 @@ def build_request(
         content=tuple(content),
         max_tokens=max_tokens,
     )
+
+
+# -- prompt sizes ----------------------------------------------------------------------------
+
+
+def request_size(request: ModelRequest) -> dict[str, int]:
+    """Characters of a request (system, the domain prefix, the rest), its images, and its
+    input tokens as the clients estimate them without a token count (characters / 3.5,
+    width × height / 750 per image, `agent.clients.pricing`)."""
+    from agent.clients.pricing import CHARS_PER_TOKEN, estimate_input_tokens, image_tokens
+
+    system = sum(len(b.text) for b in request.system if isinstance(b, TextBlock))
+    texts = [b for b in request.content if isinstance(b, TextBlock)]
+    pictures = [b for b in request.content if isinstance(b, ImageBlock)]
+    user = sum(len(b.text) for b in texts)
+    return {
+        "system_chars": system,
+        "user_chars": user,
+        "chars": system + user,
+        "text_tokens": int((system + user) / CHARS_PER_TOKEN),
+        "images": len(pictures),
+        "image_tokens": sum(image_tokens(b.png) for b in pictures),
+        "tokens": estimate_input_tokens(request),
+    }
+
+
+def sizes(domain_names: list[str] | None = None, *, images: bool = True) -> list[dict]:
+    """The first-attempt prompt of every function of every domain, measured (`request_size`).
+    The frozen dependencies a prompt carries are the people-written reference programs
+    (`domains/<d>/programs/`), standing in for what a model would have written."""
+    import domains
+    from agent.context import build_context, reference_observations
+    from toolbox.docs import toolbox_docs
+
+    docs = toolbox_docs()
+    out = []
+    for name in domain_names or domains.names():
+        domain = domains.load(name)
+        observations = reference_observations(domain) if images else ()
+        ctx = build_context(domain, observations, docs)
+        frozen = {
+            f: (domain.root / "programs" / f"{f}.py").read_text()
+            for f in SIGNATURES
+            if (domain.root / "programs" / f"{f}.py").is_file()
+        }
+        for function in SIGNATURES:
+            request = build_request(ctx, function, 1, frozen=frozen)
+            rules = ctx.rules.get(function, "")
+            out.append(
+                {
+                    "domain": name,
+                    "function": function,
+                    **request_size(request),
+                    "rules_chars": len(rules),
+                    "facts_chars": len(ctx.facts),
+                }
+            )
+    return out
+
+
+def _main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python -m agent.prompt",
+        description="Measure the prompts the authoring loop sends (first attempt, no repair).",
+    )
+    parser.add_argument("--sizes", action="store_true", help="print each prompt's size")
+    parser.add_argument("--domain", action="append", help="only this domain (repeatable)")
+    parser.add_argument("--no-images", action="store_true", help="skip the reference images")
+    args = parser.parse_args(argv)
+    if not args.sizes:
+        parser.print_help()
+        return 2
+    rows = sizes(args.domain, images=not args.no_images)
+    print(
+        "Tokens are estimated as the clients do without a token count: characters / 3.5 for "
+        "text,\nwidth × height / 750 (at most 1600) per image, plus 50 per request.\n"
+    )
+    head = (
+        "| domain | function | system chars | user chars | of which rules | total chars "
+        "| text tokens | images | image tokens | tokens |"
+    )
+    print(head)
+    print("|" + "---|" * (head.count("|") - 1))
+    for r in rows:
+        print(
+            f"| {r['domain']} | {r['function']} | {r['system_chars']} | {r['user_chars']} "
+            f"| {r['rules_chars']} | {r['chars']} | {r['text_tokens']} | {r['images']} "
+            f"| {r['image_tokens']} | {r['tokens']} |"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main())

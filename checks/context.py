@@ -70,6 +70,7 @@ class SuiteContext:
     budget: Budget
     draft: DraftCalls
     hand: Any = None  # checks.robot.RobotView: the executor's hand and arm, for plan steps
+    out_dir: Any = None  # where the checks' images go (`checks.images.write_png`); None: none
     outputs: dict[str, Any] = field(default_factory=dict)
     cache: dict[Any, Any] = field(default_factory=dict)
 

@@ -32,6 +32,7 @@ CATEGORIES: tuple[str, ...] = ("interface", "schema", "property", "domain", "ima
 MAX_TRACEBACK = 2500  # [chars] kept of a traceback (its end)
 MAX_TEXT = 1500  # [chars] of a message
 MAX_JSON = 6000  # [chars] of a JSON value shown (expected, actual, counterexample)
+MAX_OBJECTS = 32  # per-object rows kept in a check
 
 
 @dataclass(kw_only=True)
@@ -52,6 +53,10 @@ class CheckResult:
     images: list[dict[str, str]] = field(default_factory=list)
     duration_s: float | None = None
     optional: str = ""  # why a skip of this check is no failure ("" : it is required)
+    rule: str = ""  # what the check enforces, as the prompt states it (`checks.rules`)
+    failures: int | None = None  # how many of the `examples` failed (None: not counted)
+    limits: dict[str, float] = field(default_factory=dict)  # tolerances and budgets used
+    objects: list[dict[str, Any]] = field(default_factory=list)  # per object, on the case shown
 
     @property
     def failing(self) -> bool:
@@ -88,6 +93,14 @@ class CheckResult:
             d["seed"] = int(self.seed)
         if self.examples is not None:
             d["examples"] = int(self.examples)
+        if self.failures is not None and status in ("failed", "error"):
+            d["failures"] = int(self.failures)
+        if self.rule:
+            d["rule"] = clean_text(self.rule)
+        if self.limits:
+            d["limits"] = {k: _metric(v) for k, v in sorted(self.limits.items())}
+        if self.objects:
+            d["objects"] = [jsonable(o) for o in self.objects[:MAX_OBJECTS]]
         if self.traceback:
             d["traceback"] = clean_text(trim_traceback(self.traceback))
         if self.metrics:
@@ -156,9 +169,24 @@ def build_report(
     source: str,
     checks: Sequence[CheckResult | Mapping[str, Any]],
     duration_s: float | None = None,
+    rules: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The check report dict (validated against its schema)."""
+    """The check report dict (validated against its schema).
+
+    Args:
+        rules: check name → its stated rule (`checks.rules.Stated`): each check of that name
+            gets the rule's text as ``rule`` and the values it states as ``limits`` (the
+            tolerances and budgets it judged by), unless it has its own.
+    """
     ordered = order_checks(checks)
+    for c in ordered:
+        stated = (rules or {}).get(c["name"])
+        if stated is None:
+            continue
+        c.setdefault("rule", clean_text(stated.text))
+        limits = stated.limits()
+        if limits and "limits" not in c:
+            c["limits"] = {k: _metric(v) for k, v in sorted(limits.items())}
     failing = [c["name"] for c in ordered if not passes(c)]
     report: dict[str, Any] = {
         "schema_version": 1,
@@ -247,8 +275,12 @@ def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
     ]
     first = failing[0]
     lines += ["", f"### First failure: `{first['name']}` ({first['category']})"]
+    if first.get("rule"):
+        lines += ["", f"Rule: {first['rule']}"]
     if first.get("message"):
         lines += ["", first["message"]]
+    if "failures" in first and "examples" in first:
+        lines += ["", f"- failed on {first['failures']} of {first['examples']} cases checked"]
     if "expected" in first:
         lines += ["", f"- expected: `{_short_json(first['expected'], 600)}`"]
     if "actual" in first:
@@ -258,6 +290,8 @@ def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
             f"{k} = {'n/a' if v is None else f'{v:.4g}'}" for k, v in first["metrics"].items()
         )
         lines += [f"- metrics: {shown}"]
+    if first.get("objects"):
+        lines += ["", *_table(first["objects"])]
     if "counterexample" in first:
         lines += [
             "",
@@ -280,10 +314,35 @@ def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
         lines += ["", "Also failing:"]
         for c in rest:
             msg = _clip(c.get("message", "").splitlines()[0] if c.get("message") else "", 300)
-            lines += [f"- `{c['name']}` ({c['category']}): {msg}"]
+            count = (
+                f" [{c['failures']} of {c['examples']} cases]"
+                if "failures" in c and "examples" in c
+                else ""
+            )
+            lines += [f"- `{c['name']}` ({c['category']}){count}: {msg}"]
         if len(failing) > max_failures:
             lines += [f"- … and {len(failing) - max_failures} more"]
     return "\n".join(lines)
+
+
+def _cell(v: Any) -> str:
+    if isinstance(v, bool):
+        return "yes" if v else "**no**"
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    return "–" if v is None else str(v).replace("|", "/")
+
+
+def _table(rows: Sequence[Mapping[str, Any]], limit: int = 12) -> list[str]:
+    """Per-object rows as a Markdown table (the columns of the first row)."""
+    cols = list(rows[0])
+    out = ["| " + " | ".join(c.replace("_", " ") for c in cols) + " |"]
+    out.append("|" + "---|" * len(cols))
+    for row in rows[:limit]:
+        out.append("| " + " | ".join(_cell(row.get(c)) for c in cols) + " |")
+    if len(rows) > limit:
+        out.append(f"(… {len(rows) - limit} more objects)")
+    return out
 
 
 def images_of(report: Mapping[str, Any]) -> list[str]:

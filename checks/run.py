@@ -38,6 +38,7 @@ from checks.context import (
 from checks.inputs import build_cases
 from checks.report import CheckResult, build_report
 from checks.robot import RobotView
+from checks.rules import rule_map
 from checks.suites import perceive as perceive_suite
 from checks.suites import render as render_suite
 from checks.suites.plan import Unrelated
@@ -95,7 +96,7 @@ def run_checks(
         checks, ctx = _draft_checks(ex, dom, spec, function, source, deps, cases, budget, out_dir)
         if ctx is not None and function == "perceive":
             renders = _rerender(ex, deps, ctx, spec, budget)
-            checks.append(perceive_suite.accuracy(ctx, dom))
+            checks.append(perceive_suite.accuracy(ctx, dom, renders, out_dir))
             checks.append(perceive_suite.rerender(ctx, renders, out_dir))
     finally:
         if own:
@@ -106,6 +107,7 @@ def run_checks(
         source=source,
         checks=checks,
         duration_s=time.perf_counter() - t0,
+        rules=rule_map(dom, function),
     )
 
 
@@ -140,6 +142,7 @@ def _draft_checks(
             budget=budget,
             draft=draft,
             hand=robot_view(dom.name) if function == "plan" else None,
+            out_dir=out_dir,
         )
         checks += suites.SUITES[function](ctx)
         for prop in properties.properties_for(dom, function):

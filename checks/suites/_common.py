@@ -136,6 +136,18 @@ def apply_failure(r: CheckResult, f: Failure) -> None:
     r.traceback = f.traceback
 
 
+def raise_first(r: CheckResult, found: Sequence[Failure], what: str) -> None:
+    """Raise the first of the failures a check found over its cases, counted: the report says
+    on how many of its `examples` it failed."""
+    if not found:
+        return
+    r.failures = len(found)
+    first = found[0]
+    if r.examples and len(found) > 0:
+        first.message += f" (fails on {len(found)} of {r.examples} {what})"
+    raise first
+
+
 def raised(what: str, result: Any, counterexample: Any = None, expected: Any = None) -> Failure:
     """The Failure for a draft call that raised or timed out."""
     return Failure(

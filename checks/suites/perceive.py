@@ -19,11 +19,60 @@ from checks import images
 from checks.context import SuiteContext
 from checks.hypo import Failure
 from checks.report import CheckResult
-from checks.suites._common import copy_records, raised, run_check, same_value, scene_spec
+from checks.rules import Rule
+from checks.suites._common import (
+    copy_records,
+    raise_first,
+    raised,
+    run_check,
+    same_value,
+    scene_spec,
+)
 from contracts import se3
 from contracts.errors import ContractError
 from contracts.validate import validate
 from sandbox import MESHES
+
+PROPER_TOL = 1e-6  # a proper rotation: max |RᵀR − I| and |det R − 1| at most this
+
+RULES: tuple[Rule, ...] = (
+    Rule(
+        check="schema.output",
+        text='`perceive` returns a list of records `{"id": str, "mesh": str, "pose": '
+        "(4, 4) rigid transform T_world_object}` with unique ids.",
+    ),
+    Rule(
+        check="property.ids_match_catalogue",
+        text="Every record's id is an object of the catalogue and its `mesh` that object's "
+        "catalogue mesh key, and the ids are exactly the objects the scene holds, those the "
+        "camera cannot see included (see what the task text says about hidden objects).",
+    ),
+    Rule(
+        check="property.proper_rotations",
+        text="Every pose's rotation is proper: orthonormal with determinant one, to within "
+        "{checks.suites.perceive:PROPER_TOL}.",
+    ),
+    Rule(
+        check="property.deterministic",
+        text="Two calls on the same observation return identical records (same order, same poses).",
+    ),
+    Rule(
+        check="property.accuracy",
+        text="On every checked observation each object of the scene is found with its pose "
+        "within {domain.tolerance.translation|mm}[? and {domain.tolerance.rotation|deg}?] of "
+        "the true pose, modulo the object's symmetry, and the domain's reference relations "
+        "computed on your records equal those of the true scene.",
+    ),
+    Rule(
+        check="image.perceive_rerender",
+        text="The frozen `render` of your records is compared, per object, with the "
+        "simulator's silhouettes and depth of the observed scene (cameras with the domain "
+        "cameras' width and height divided by {checks.inputs:HALF_RES}): silhouette IoU at "
+        "least {checks.images:IOU_MIN}, mean IoU at least {checks.images:IOU_MEAN_MIN}, median "
+        "depth error at most {checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object "
+        "(objects shown with fewer than {checks.images:MIN_AREA|px} are not scored).",
+    ),
+)
 
 
 def perceived(ctx: SuiteContext, i: int) -> Any:
@@ -51,19 +100,21 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
     valid: dict[int, list[dict]] = {}
 
     def schema(r: CheckResult) -> None:
-        first: Failure | None = None
+        found: list[Failure] = []
         for i, case in enumerate(cases):
             res = perceived(ctx, i)
             if not res.ok:
-                first = first or raised(f"perceive on {case['name']}", res, where(ctx, case))
+                found.append(raised(f"perceive on {case['name']}", res, where(ctx, case)))
                 continue
             try:
                 validate("records", res.value)
             except ContractError as e:
-                first = first or Failure(
-                    message=f"the records perceived in {case['name']} break the contract: {e}",
-                    actual=str(e),
-                    counterexample=where(ctx, case),
+                found.append(
+                    Failure(
+                        message=f"the records perceived in {case['name']} break the contract: {e}",
+                        actual=str(e),
+                        counterexample=where(ctx, case),
+                    )
                 )
                 continue
             valid[i] = copy_records(res.value)
@@ -72,8 +123,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
                 for o in res.value
             ]
         r.examples = len(cases)
-        if first:
-            raise first
+        raise_first(r, found, "observations")
 
     out.append(
         run_check(
@@ -84,35 +134,41 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         )
     )
 
-    def ids(r: CheckResult) -> None:
-        for i, recs in valid.items():
-            case = cases[i]
-            for k, o in enumerate(recs):
-                if o["id"] not in spec.catalogue:
-                    raise Failure(
-                        message=f"records[{k}].id '{o['id']}' is not an object of the catalogue",
-                        expected=sorted(spec.catalogue),
-                        actual=o["id"],
-                        counterexample=where(ctx, case),
-                    )
-                if o["mesh"] != spec.catalogue[o["id"]]:
-                    raise Failure(
-                        message=f"records[{k}]: '{o['id']}' has mesh '{spec.catalogue[o['id']]}' "
-                        f"in the catalogue, not '{o['mesh']}'",
-                        expected=spec.catalogue[o["id"]],
-                        actual=o["mesh"],
-                        counterexample=where(ctx, case),
-                    )
-            truth = sorted(t["id"] for t in case["truth"])
-            got = sorted(o["id"] for o in recs)
-            if got != truth:
-                raise Failure(
-                    message=f"the scene in {case['name']} holds {truth}; perceive returned {got}",
-                    expected=truth,
-                    actual=got,
+    def ids_problem(case: dict, recs: list[dict]) -> Failure | None:
+        for k, o in enumerate(recs):
+            if o["id"] not in spec.catalogue:
+                return Failure(
+                    message=f"records[{k}].id '{o['id']}' is not an object of the catalogue",
+                    expected=sorted(spec.catalogue),
+                    actual=o["id"],
                     counterexample=where(ctx, case),
                 )
+            if o["mesh"] != spec.catalogue[o["id"]]:
+                return Failure(
+                    message=f"records[{k}]: '{o['id']}' has mesh '{spec.catalogue[o['id']]}' "
+                    f"in the catalogue, not '{o['mesh']}'",
+                    expected=spec.catalogue[o["id"]],
+                    actual=o["mesh"],
+                    counterexample=where(ctx, case),
+                )
+        truth = sorted(t["id"] for t in case["truth"])
+        got = sorted(o["id"] for o in recs)
+        if got != truth:
+            hidden = sorted(set(truth) - set(got))
+            return Failure(
+                message=f"the scene in {case['name']} holds {truth}; perceive returned {got}"
+                + (f" (missing: {hidden}; every object of the scene must be reported, also "
+                   "one the camera cannot see)" if hidden else ""),
+                expected=truth,
+                actual=got,
+                counterexample=where(ctx, case),
+            )  # fmt: skip
+        return None
+
+    def ids(r: CheckResult) -> None:
+        found = [f for i, recs in valid.items() if (f := ids_problem(cases[i], recs))]
         r.examples = len(valid)
+        raise_first(r, found, "observations")
 
     out.append(run_check("property.ids_match_catalogue", "property", ids))
 
@@ -120,7 +176,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         for i, recs in valid.items():
             for k, o in enumerate(recs):
                 R = o["pose"][:3, :3]
-                if not se3.is_proper_rotation(R, tol=1e-6):
+                if not se3.is_proper_rotation(R, tol=PROPER_TOL):
                     ortho, det = se3.rotation_defect(R)
                     raise Failure(
                         message=f"records[{k}] ('{o['id']}'): the rotation is not proper "
@@ -150,8 +206,88 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
     return out
 
 
-def accuracy(ctx: SuiteContext, domain: Any) -> CheckResult:
-    """Every object found and within tolerance of the truth, with the same reference relations."""
+def object_feedback(
+    ctx: SuiteContext,
+    domain: Any,
+    case: dict,
+    records: list[dict],
+    rendered: Mapping[str, Any] | None,
+    out_dir: Any,
+    name: str,
+) -> tuple[list[dict], list[dict[str, str]]]:
+    """Per object of an observation: the pose error against the tolerance and the observed
+    silhouette against that of `render(perceive(I))`, as report rows and one grid image
+    (wrong objects first)."""
+    from sim.score import object_errors
+
+    tol = domain.tolerance
+    errors = {e.id: e for e in object_errors(domain, records, case["truth"])}
+    ids = [o["id"] for o in case["truth"]]
+    matches: dict[str, images.ObjectMatch] = {}
+    if rendered is not None and "error" not in rendered:
+        try:
+            matches = {
+                m.id: m for m in images.compare(rendered, rendered["ids"], case["reference"], ids)
+            }
+        except ValueError:
+            matches = {}
+    rows, tiles = [], []
+    for oid in sorted(ids, key=lambda i: (i in errors and errors[i].within, ids.index(i))):
+        e, m = errors.get(oid), matches.get(oid)
+        row: dict[str, Any] = {
+            "object": oid,
+            "position_error_mm": None if e is None else round(1000 * e.translation, 1),
+        }
+        if tol.rotation is not None:
+            row["rotation_error_deg"] = None if e is None else round(np.degrees(e.rotation), 1)
+        row["within_tolerance"] = bool(e is not None and e.within)
+        row["silhouette_iou"] = None if m is None else round(m.iou, 3)
+        row["pixels_observed"] = None if m is None else m.area_reference
+        row["pixels_rendered"] = None if m is None else m.area_candidate
+        rows.append(row)
+        if e is None:
+            first = "not perceived"
+        else:
+            first = f"{1000 * e.translation:.1f}/{1000 * tol.translation:g} mm" + (
+                ""
+                if tol.rotation is None
+                else f" {np.degrees(e.rotation):.0f}/{np.degrees(tol.rotation):g} deg"
+            )
+        second = "" if m is None else f"IoU {m.iou:.2f}, {m.area_reference} px seen"
+        tiles.append({"id": oid, "ok": row["within_tolerance"], "lines": [first, second]})
+    pictures: list[dict[str, str]] = []
+    if out_dir is not None:
+        grid = images.object_tiles(
+            case["reference"]["rgb"],
+            case["reference"]["mask"],
+            ids,
+            None if not matches or rendered is None else rendered["mask"],
+            [] if not matches or rendered is None else rendered["ids"],
+            tiles,
+        )
+        pictures = images.write_png(
+            out_dir,
+            f"{name}_{case['name']}",
+            grid,
+            f"{case['name']}, per object (wrong ones first, red frame): the observed silhouette "
+            "against render(perceive(I)) (white both, red only observed, blue only rendered); "
+            "under each: position error / tolerance"
+            + ("" if tol.rotation is None else ", rotation error / tolerance")
+            + ", silhouette IoU and the pixels the object shows",
+        )
+    return rows, pictures
+
+
+def accuracy(
+    ctx: SuiteContext,
+    domain: Any,
+    renders: Mapping[str, Any] | None = None,
+    out_dir: Any = None,
+) -> CheckResult:
+    """Every object found and within tolerance of the truth, with the same reference relations.
+
+    `renders` (the re-renders `image.perceive_rerender` judges) and `out_dir` give the failing
+    observation's per-object rows and picture."""
     from sim.score import state_accuracy
 
     t0 = time.perf_counter()
@@ -200,6 +336,10 @@ def accuracy(ctx: SuiteContext, domain: Any) -> CheckResult:
         truth = {o["id"]: o for o in case["truth"]}
         got = {o["id"]: o for o in recs}
         shown = wrong[0].id if wrong else None
+        r.objects, r.images = object_feedback(
+            ctx, domain, case, recs, (renders or {}).get(case["name"]), out_dir, "accuracy"
+        )
+        ctx.outputs["accuracy_shown"] = case["name"]
         r.fail(
             f"perceive is wrong on {case['name']}: " + "; ".join(parts),
             expected=None
@@ -215,6 +355,9 @@ def accuracy(ctx: SuiteContext, domain: Any) -> CheckResult:
         )
     if wrong_cases and r.status == "failed":
         r.message += f" ({len(wrong_cases)} of {len(cases)} observations wrong)"
+    if r.status == "failed":
+        r.failures = len(wrong_cases) + len(cases) - len(scored)
+        r.examples = len(cases)
     r.metrics = {
         "states_correct": float(len(scored) - len(wrong_cases)),
         "translation_error_median_m": float(np.median(errors)) if errors else None,
@@ -239,7 +382,7 @@ def rerender(ctx: SuiteContext, renders: Mapping[str, Any], out_dir: Any) -> Che
     cases = ctx.cases["observations"]
     worst: tuple[float, dict, Any, list] | None = None
     first_problem: tuple[dict, list[str], list] | None = None
-    judged = 0
+    judged = bad = 0
     for case in cases:
         got = renders.get(case["name"])
         if got is None:
@@ -248,13 +391,16 @@ def rerender(ctx: SuiteContext, renders: Mapping[str, Any], out_dir: Any) -> Che
         ids = [o["id"] for o in case["truth"]]
         if "error" in got:
             first_problem = first_problem or (case, [got["error"]], [])
+            bad += 1
             continue
         try:
             matches = images.compare(got, got["ids"], case["reference"], ids)
         except ValueError as e:
             first_problem = first_problem or (case, [f"the re-render: {e}"], [])
+            bad += 1
             continue
         problems = images.judge(matches)
+        bad += bool(problems)
         score = images.summary(matches)["iou_mean"] or 0.0
         if worst is None or score < worst[0]:
             worst = (score, case, got, matches)
@@ -288,6 +434,22 @@ def rerender(ctx: SuiteContext, renders: Mapping[str, Any], out_dir: Any) -> Che
             f"render(perceive(I)) does not match I for {case['name']}: " + "; ".join(problems[:3]),
             actual=[m.to_dict() for m in matches] or problems,
             counterexample=where(ctx, case),
+            failures=bad,
         )
+        recs = ctx.outputs.get("perceived", {}).get(case["name"])
+        if recs is not None and matches:
+            import domains
+
+            shown_already = ctx.outputs.get("accuracy_shown") == case["name"]
+            r.objects, grid = object_feedback(
+                ctx,
+                domains.load(ctx.spec.name),
+                case,
+                recs,
+                renders.get(case["name"]),
+                None if shown_already else out_dir,
+                "perceive_rerender_objects",
+            )
+            r.images = grid + r.images
     r.duration_s = time.perf_counter() - t0
     return r

@@ -17,26 +17,91 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from hypothesis import strategies as st
 
 from checks.context import SuiteContext
 from checks.hypo import Failure, run_property
 from checks.report import CheckResult
+from checks.rules import Rule
+from checks.suites import _plan_view
 from checks.suites._common import (
     copy_records,
     first_difference,
+    raise_first,
     raised,
     run_check,
     same_value,
     scene_spec,
     translated,
 )
+from contracts import se3
 from contracts.errors import ContractError
 from contracts.validate import validate
 from geometry import apply_plan
 from sandbox import MESHES
 
 VARIANTS = ("as_generated", "both_moved", "goal_is_moved_start")
+SHIFT_MM = 60  # [mm] largest shift along x and along y of a moved variant
+STEPS_PER_OBJECT = 3  # a plan may have this many steps per object ...
+STEPS_PER_REFERENCE_STEP = 2  # ... or this many per step of the reference order, if more
+
+RULES: tuple[Rule, ...] = (
+    Rule(
+        check="schema.output",
+        text='`plan` returns `{"status": "ok", "steps": [{"object": id, '
+        '"target_pose": (4, 4)}, ...]}` or `{"status": "infeasible", "reason": str}`, '
+        "each step naming an object of the start state.",
+    ),
+    Rule(
+        check="property.reaches_goal",
+        text="On generated start/goal pairs (as generated, both scenes shifted together by up "
+        "to {checks.suites.plan:SHIFT_MM} mm along x and y, or the goal a shifted copy of the "
+        "start) your steps, applied in order, pick only objects nothing rests on, leave after "
+        "every step no two objects interpenetrating by more than "
+        "{geometry.tolerances:TOLERANCES.penetration|mm}, every object resting on the table or "
+        "on others (gap at most {geometry.tolerances:TOLERANCES.contact|mm}) with its centre of "
+        "mass, and that of its load, over its support (to within "
+        "{geometry.tolerances:TOLERANCES.com_margin|mm}), and the moved object with every point "
+        "inside the workspace ({domain.workspace|region}), and end with every object within "
+        "{domain.tolerance.translation|mm}[? and {domain.tolerance.rotation|deg}?] of its goal "
+        "pose modulo its symmetry; answering infeasible on these reachable goals fails.",
+    ),
+    Rule(
+        check="property.plan_length_bounded",
+        text="A plan has at most {checks.suites.plan:STEPS_PER_OBJECT} steps per object (or "
+        "{checks.suites.plan:STEPS_PER_REFERENCE_STEP} per step of the domain's reference "
+        "construction order, when that allows more).",
+    ),
+    Rule(
+        check="property.identity_plan_empty",
+        text='`plan(s, s)` returns `{"status": "ok", "steps": []}`: objects already '
+        "within tolerance of their goal pose need no step.",
+    ),
+    Rule(
+        check="property.deterministic",
+        text="Two calls on the same start and goal return the same plan.",
+    ),
+    Rule(
+        check="property.infeasible_explicit",
+        text="A goal no plan can reach (an object floating above its support, two objects in "
+        'one place) gets `{"status": "infeasible", "reason": str}`, never an exception '
+        "or steps.",
+    ),
+    Rule(
+        check="property.gripper_room",
+        text="Every step is one the robot can make as `toolbox.robot.Hand(meshes, "
+        "symmetries).can_move` models it: a top-down 2F-85 grasp across two opposite vertical "
+        "faces at most {geometry.hand:plan_grasps.__kwdefaults__[max_width]|mm} apart (the "
+        "jaws open at most {toolbox.robot:MAX_OPENING|mm} and need room on both sides) whose "
+        "fingers, finger linkages, gripper base and wrist clear every other object by at least "
+        "{geometry.tolerances:TOLERANCES.grasp_margins[-1]|mm} at the pick (the objects as "
+        "they are before the step) and at the place (as they are after it), nothing above the "
+        "object at either end, a target turned from the current pose only about the vertical "
+        "(to within {geometry.tolerances:TOLERANCES.yaw_only|deg}, modulo its symmetry), and "
+        "an arm (IK) solution at both ends.",
+    ),
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -98,6 +163,50 @@ def plan_of(ctx: SuiteContext, x: tuple) -> tuple[Any, Any] | None:
     return ctx.cache[key]
 
 
+def _problem_picture(ctx: SuiteContext, extra: dict[str, Any]) -> list[dict[str, str]]:
+    """The state where `apply_plan` found its problem, drawn (feedback only)."""
+    from geometry import collisions, supports
+
+    p, start, steps, goal = extra["problem"], extra["start"], extra["steps"], extra["goal"]
+    k = len(steps) if p.step is None else p.step
+    after = _plan_view.state_before(start, steps, min(k + 1, len(steps)))
+    shapes = ctx.spec.geometry
+    if p.kind == "not_clear":
+        before = _plan_view.state_before(start, steps, k)
+        blockers = sorted(i for i, on in supports(before, shapes).items() if p.object in on)
+    elif p.kind == "collision":
+        hits = collisions(after, shapes)
+        blockers = sorted({i for a, b, _ in hits for i in (a, b) if i != "table"})
+    elif p.kind == "goal":
+        target = {o["id"]: o for o in goal}
+        blockers = [
+            str(o["id"])
+            for o in after
+            if o["id"] in target
+            and not se3.within_tolerance(
+                o["pose"],
+                np.asarray(target[o["id"]]["pose"], float),
+                trans_tol=ctx.spec.trans_tol,
+                rot_tol=ctx.spec.rot_tol,
+                symmetries=ctx.spec.symmetries.get(o["mesh"]),
+            )
+        ]
+    else:
+        blockers = [p.object] if p.object else []
+    blockers = [b for b in blockers if b != (None if p.step is None else steps[k]["object"])]
+    _, pictures = _plan_view.step_picture(
+        ctx,
+        start,
+        steps,
+        k,
+        blockers=blockers,
+        goal=goal if p.kind == "goal" else None,
+        name=f"reaches_goal_{p.kind}",
+        what=f"property.reaches_goal ({p.kind})",
+    )
+    return pictures
+
+
 def _counterexample(ctx: SuiteContext, start: list, goal: list) -> dict[str, Any]:
     return {"start": scene_spec(ctx.spec.name, start), "goal": scene_spec(ctx.spec.name, goal)}
 
@@ -121,6 +230,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
     out: list[CheckResult] = []
 
     def schema(r: CheckResult) -> None:
+        found: list[Failure] = []
         for x in pool:
             got = plan_of(ctx, x)
             if got is None:
@@ -128,15 +238,19 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
             res, (s, g, *_rest) = got
             ce = _counterexample(ctx, s, g)
             if not res.ok:
-                raise raised("plan(start, goal)", res, ce)
+                found.append(raised("plan(start, goal)", res, ce))
+                continue
             problem = _schema_problem(ctx, res.value, {str(o["id"]) for o in s})
             if problem:
-                raise Failure(
-                    message=f"the plan returned is not a plan: {problem}",
-                    actual=problem,
-                    counterexample=ce,
+                found.append(
+                    Failure(
+                        message=f"the plan returned is not a plan: {problem}",
+                        actual=problem,
+                        counterexample=ce,
+                    )
                 )
         r.examples = len(pool)
+        raise_first(r, found, "instances")
 
     out.append(
         run_check(
@@ -187,6 +301,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
                 "supported state inside the workspace; the last state matches the goal",
                 actual={"problem": p.kind, "steps": shown},
                 counterexample=ce,
+                extra={"start": s, "goal": g, "steps": value["steps"], "problem": p},
             )
         return None
 
@@ -194,8 +309,8 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         strategy = st.tuples(
             st.integers(0, n - 1),
             st.sampled_from(VARIANTS),
-            st.integers(-60, 60),
-            st.integers(-60, 60),
+            st.integers(-SHIFT_MM, SHIFT_MM),
+            st.integers(-SHIFT_MM, SHIFT_MM),
         )
         outcome = run_property(
             reaches,
@@ -207,11 +322,24 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         )
         r.examples = outcome.examples
         if outcome.failure:
-            raise outcome.failure
+            f = outcome.failure
+            generated = [x for x in pool if plan_of(ctx, x) is not None]
+            failing = sum(reaches(x) is not None for x in generated)
+            r.metrics = {
+                "generated_instances": float(len(generated)),
+                "generated_instances_failing": float(failing),
+            }
+            f.message += (
+                f" (the plans fail on {failing} of the {len(generated)} instances as generated)"
+            )
+            if "problem" in f.extra:
+                r.images = _problem_picture(ctx, f.extra)
+            raise f
 
     out.append(run_check("property.reaches_goal", "property", reaches_check, seed=ctx.seed))
 
     def bounded(r: CheckResult) -> None:
+        found: list[Failure] = []
         for x in pool:
             got = plan_of(ctx, x)
             if got is None:
@@ -221,16 +349,19 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
                 continue
             steps = res.value.get("steps", [])
             order = instances[x[0]].get("order_len")
-            bound = max(3 * len(s), 2 * int(order or 0))
+            bound = max(STEPS_PER_OBJECT * len(s), STEPS_PER_REFERENCE_STEP * int(order or 0))
             if len(steps) > bound:
-                raise Failure(
-                    message=f"the plan has {len(steps)} steps for {len(s)} objects; at most "
-                    f"{bound} are allowed (the domain's reference order has {order})",
-                    expected=f"<= {bound} steps",
-                    actual=f"{len(steps)} steps",
-                    counterexample=_counterexample(ctx, s, g),
+                found.append(
+                    Failure(
+                        message=f"the plan has {len(steps)} steps for {len(s)} objects; at most "
+                        f"{bound} are allowed (the domain's reference order has {order})",
+                        expected=f"<= {bound} steps",
+                        actual=f"{len(steps)} steps",
+                        counterexample=_counterexample(ctx, s, g),
+                    )
                 )
         r.examples = len(pool)
+        raise_first(r, found, "instances")
 
     out.append(run_check("property.plan_length_bounded", "property", bounded))
 
@@ -311,6 +442,7 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
 
     def room(r: CheckResult) -> None:
         n_plans = n_steps = 0
+        found: list[Failure] = []
         for x in pool:
             got = plan_of(ctx, x)
             if got is None:
@@ -325,18 +457,37 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
             problem = hand.first_problem(s, value["steps"])
             n_steps += problem.checked
             if problem.step is not None:
-                raise Failure(
-                    message=f"on {what}: step {problem.step} {problem.message}",
+                if found:  # counted; the first one is shown
+                    found.append(Failure(message=""))
+                    continue
+                hit, pictures = _plan_view.step_picture(
+                    ctx,
+                    s,
+                    value["steps"],
+                    problem.step,
+                    blockers=problem.blockers,
+                    hands="no top-down" in problem.message,
+                    name=f"gripper_room_{x[0]}",
+                    what=f"property.gripper_room on {what}",
+                )
+                r.images = pictures
+                found.append(Failure(
+                    message=f"on {what}: step {problem.step} {problem.message}"
+                    + (f". Diagnosis: {hit}" if hit else ""),
                     expected="every step has a top-down 2F-85 grasp that clears the other objects "
                     "at the pick (the state before the step) and at the place (after it), "
                     "nothing above the object at either, and an arm pose (IK) at both",
-                    actual={"step": problem.step, "object": problem.object, "steps": value["steps"][
-                        : problem.step + 1
-                    ]},
+                    actual={
+                        "step": problem.step,
+                        "object": problem.object,
+                        "blockers": list(problem.blockers),
+                        "steps": value["steps"][: problem.step + 1],
+                    },
                     counterexample=_counterexample(ctx, s, g),
-                )
+                ))  # fmt: skip
         r.examples = n_plans
         r.metrics = {"steps_checked": float(n_steps)}
+        raise_first(r, found, "plans")
 
     hand = ctx.hand
     out.append(

@@ -14,12 +14,14 @@ from hypothesis import strategies as st
 from checks.context import SuiteContext
 from checks.hypo import Failure, run_property
 from checks.report import CheckResult
+from checks.rules import Rule
 from checks.suites._common import (
     edge_multiset,
     first_difference,
     order_from_keys,
     order_keys,
     permuted,
+    raise_first,
     raised,
     run_check,
     same_value,
@@ -29,6 +31,33 @@ from checks.suites._common import (
 from contracts.errors import ContractError
 from contracts.validate import validate
 from sandbox import MESHES
+
+RULES: tuple[Rule, ...] = (
+    Rule(
+        check="schema.output",
+        text='`relate` returns `networkx.node_link_data(G, edges="edges")` of a '
+        "`networkx.MultiDiGraph` whose nodes are exactly the record ids and each of whose "
+        "edges has a `type`.",
+    ),
+    Rule(
+        check="property.relations_declared",
+        text="The module defines `RELATIONS`, a non-empty dict of strings {edge type: meaning}, "
+        "and every edge type `relate` returns is one of its keys.",
+    ),
+    Rule(
+        check="property.deterministic",
+        text="Two calls on the same records return the same graph.",
+    ),
+    Rule(
+        check="property.record_order_invariant",
+        text="The same records in another order give the same edges.",
+    ),
+    Rule(
+        check="property.translation_invariant",
+        text="Moving every record by one common horizontal shift (up to "
+        "{checks.budget:DEFAULT.translation_mm} mm along x and along y) gives the same edges.",
+    ),
+)
 
 
 def relations_of(ctx: SuiteContext, records: list[dict], label: str) -> Any:
@@ -60,20 +89,25 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         return relations_of(ctx, scenes[i]["records"], f"scene {scenes[i]['name']}")
 
     def schema(r: CheckResult) -> None:
+        found: list[Failure] = []
         for i, sc in enumerate(scenes):
             res = base(i)
             ce = scene_spec(domain, sc["records"])
             if not res.ok:
-                raise raised("relate(records)", res, ce)
+                found.append(raised("relate(records)", res, ce))
+                continue
             problem = _schema_problem(res.value, sc["records"])
             if problem:
-                raise Failure(
-                    message=f"the graph returned for scene {sc['name']} is not a relation graph: "
-                    f"{problem}",
-                    actual=problem,
-                    counterexample=ce,
+                found.append(
+                    Failure(
+                        message=f"the graph returned for scene {sc['name']} is not a relation "
+                        f"graph: {problem}",
+                        actual=problem,
+                        counterexample=ce,
+                    )
                 )
         r.examples = len(scenes)
+        raise_first(r, found, "scenes")
 
     out.append(
         run_check(

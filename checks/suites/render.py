@@ -16,11 +16,13 @@ from checks import images
 from checks.context import SuiteContext
 from checks.hypo import Failure, run_property
 from checks.report import CheckResult
+from checks.rules import Rule
 from checks.suites._common import (
     copy_records,
     order_from_keys,
     order_keys,
     permuted,
+    raise_first,
     raised,
     run_check,
     scene_spec,
@@ -30,7 +32,48 @@ from sandbox import MESHES
 
 AGREEMENT = 0.995  # share of pixels that must agree when only the record order changed
 DEPTH_WHERE_VISIBLE = 0.01  # share of object pixels allowed without depth (raster edges) [1]
-DEPTH_OBJECT = 0.5  # the same for any one object of 20 pixels or more: small ones are all edge
+DEPTH_OBJECT = 0.5  # the same for any one object of DEPTH_OBJECT_MIN_PX pixels or more
+DEPTH_OBJECT_MIN_PX = 20  # [px] smaller objects are all edge
+
+RULES: tuple[Rule, ...] = (
+    Rule(
+        check="schema.output",
+        text="`render` returns a dict with `rgb` (H, W, 3) uint8, `depth` (H, W) float in metres, "
+        "finite and never negative, and `mask` (H, W) int holding -1 or an index into `records`, "
+        "where H and W are the given camera's height and width.",
+    ),
+    Rule(
+        check="property.deterministic",
+        text="Two calls on the same records and camera return identical `rgb`, `depth` and `mask`.",
+    ),
+    Rule(
+        check="property.empty_scene",
+        text="With no records, `mask` is -1 and `depth` is 0 everywhere.",
+    ),
+    Rule(
+        check="property.depth_where_visible",
+        text="Every pixel the mask gives to a record has a positive depth, but for at most "
+        "{checks.suites.render:DEPTH_WHERE_VISIBLE|pct} of all such pixels and "
+        "{checks.suites.render:DEPTH_OBJECT|pct} of any one object's (objects of "
+        "{checks.suites.render:DEPTH_OBJECT_MIN_PX|px} or more).",
+    ),
+    Rule(
+        check="property.mask_follows_record_order",
+        text="`mask` holds each pixel's index into `records` as given: the same records in "
+        "another order must give the correspondingly renumbered mask on at least "
+        "{checks.suites.render:AGREEMENT|pct} of the pixels.",
+    ),
+    Rule(
+        check="image.render_vs_simulator",
+        text="`render` of the true records is compared, per object, with the simulator's image "
+        "of the same scene (cameras with the domain cameras' width and height divided by "
+        "{checks.inputs:HALF_RES}): silhouette IoU at least {checks.images:IOU_MIN}, mean IoU "
+        "at least {checks.images:IOU_MEAN_MIN}, median depth error at most "
+        "{checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object (objects the simulator "
+        "shows with fewer than {checks.images:MIN_AREA|px} are not scored; colours need not "
+        "match).",
+    ),
+)
 
 
 def render_of(ctx: SuiteContext, records: list[dict], camera: dict, label: str) -> Any:
@@ -79,19 +122,23 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         return render_of(ctx, sc["records"], sc["camera"], f"scene {sc['name']}")
 
     def schema(r: CheckResult) -> None:
+        found: list[Failure] = []
         for i, sc in enumerate(scenes):
             res = base(i)
             ce = {"scene": scene_spec(domain, sc["records"]), "camera": to_jsonable(sc["camera"])}
             if not res.ok:
-                raise raised("render(records, meshes, camera)", res, ce)
+                found.append(raised("render(records, meshes, camera)", res, ce))
+                continue
             problem = output_problem(res.value, sc["camera"], len(sc["records"]))
             if problem:
-                raise Failure(message=problem, actual=problem, counterexample=ce)
-            if sc.get("image"):
+                found.append(Failure(message=problem, actual=problem, counterexample=ce))
+                continue
+            if sc.get("image") and not found:  # (the image check needs them all)
                 renders[sc["name"]] = {
                     k: np.asarray(res.value[k]) for k in ("rgb", "depth", "mask")
                 }
         r.examples = len(scenes)
+        raise_first(r, found, "scenes")
 
     out.append(
         run_check(
@@ -175,7 +222,11 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
                 (k, int((missing & (mask == k)).sum()), int((mask == k).sum()))
                 for k in np.unique(mask[mask >= 0])
             ]
-            bad = [(k, m, n) for k, m, n in per_object if n >= 20 and m > DEPTH_OBJECT * n]
+            bad = [
+                (k, m, n)
+                for k, m, n in per_object
+                if n >= DEPTH_OBJECT_MIN_PX and m > DEPTH_OBJECT * n
+            ]
             if share > DEPTH_WHERE_VISIBLE or bad:
                 k, m, n = bad[0] if bad else max(per_object, key=lambda t: t[1] / max(t[2], 1))
                 raise Failure(
@@ -274,6 +325,7 @@ def render_vs_simulator(ctx: SuiteContext, out_dir: Any) -> CheckResult:
         return r
     worst: tuple[float, dict, Any, list] | None = None
     first_problem: tuple[dict, list[str], list] | None = None
+    bad = 0
     for sc in cases:
         got = renders[sc["name"]]
         ids = [o["id"] for o in sc["records"]]
@@ -281,8 +333,10 @@ def render_vs_simulator(ctx: SuiteContext, out_dir: Any) -> CheckResult:
             matches = images.compare(got, ids, sc["reference"], ids)
         except ValueError as e:
             first_problem = first_problem or (sc, [str(e)], [])
+            bad += 1
             continue
         problems = images.judge(matches)
+        bad += bool(problems)
         score = images.summary(matches)["iou_mean"] or 0.0
         if worst is None or score < worst[0]:
             worst = (score, sc, got, matches)
@@ -313,6 +367,8 @@ def render_vs_simulator(ctx: SuiteContext, out_dir: Any) -> CheckResult:
                 "scene": scene_spec(ctx.spec.name, sc["records"]),
                 "camera": to_jsonable(sc["camera"]),
             },
+            failures=bad,
         )
+        r.objects = [m.to_dict() for m in matches]
     r.duration_s = time.perf_counter() - t0
     return r
