@@ -34,6 +34,7 @@ from geometry.tolerances import TOLERANCES
 WORKSPACE = Workspace(x=(0.25, 0.75), y=(-0.35, 0.35), reach=0.78)
 """Where the FR3 reaches top-down with the 2F-85: every point of an object it picks or places
 must lie inside (the plan checks refuse a step outside, and generators keep scenes inside)."""
+MAX_GRASP_WIDTH = 0.080  # [m] the widest face pair the jaws take (they open to 85 mm)
 VERTICAL_TOL = TOLERANCES.face_vertical
 ANTIPARALLEL_TOL = TOLERANCES.face_antiparallel
 YAW_ONLY_TOL = TOLERANCES.yaw_only
@@ -569,7 +570,7 @@ def plan_grasps(
     place_obstacles: Sequence[Obstacle] = (),
     fingers: FingerModel | None = None,
     table_z: float = 0.0,
-    max_width: float = 0.080,
+    max_width: float = MAX_GRASP_WIDTH,
     margins: Sequence[float] = TOLERANCES.grasp_margins,
     max_symmetries: int = 4,
     limit: int | None = None,

@@ -57,6 +57,7 @@ from toolbox.registration import (
 from toolbox.render import compare_renders, overlay_mask, render_scene
 from toolbox.robot import (
     JAW_CLEARANCES,
+    MAX_GRASP_WIDTH,
     MAX_OPENING,
     WORKSPACE,
     Grasp,
@@ -101,6 +102,7 @@ from toolbox.vision import (
 
 __all__ = [
     "JAW_CLEARANCES",
+    "MAX_GRASP_WIDTH",
     "MAX_OPENING",
     "WORKSPACE",
     "Grasp",

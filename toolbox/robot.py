@@ -4,8 +4,8 @@ This is the executor's own model (`geometry.hand`, re-exported): it picks its gr
 these functions, and the plan checks (`property.gripper_room`) refuse every step they reject.
 The robot is a Franka FR3 with a Robotiq 2F-85 parallel gripper. A step is one transfer: the
 gripper comes down vertically over the object, closes its jaws across two opposite vertical
-faces (at most 85 mm apart), lifts it straight up, carries it at a safe height, turns it only
-about the vertical, lowers it straight down onto the target and opens. So a step needs:
+faces (at most `MAX_GRASP_WIDTH` apart), lifts it straight up, carries it at a safe height,
+turns it only about the vertical, lowers it straight down onto the target and opens. So a step needs:
 
 - a grasp whose fingers, finger linkages, gripper base and the arm's wrist clear every other
   object — at the pick, among the objects as they are before the step, and at the place,
@@ -31,11 +31,12 @@ from typing import Any
 import numpy as np
 
 from geometry import STROKE, WORKSPACE, GraspReport, MoveVerdict, Shape, Workspace
-from geometry.hand import FingerModel, Grasp, MoveCheck, Obstacle, plan_grasps
+from geometry.hand import MAX_GRASP_WIDTH, FingerModel, Grasp, MoveCheck, Obstacle, plan_grasps
 from toolbox.errors import ToolboxError
 
 __all__ = [
     "JAW_CLEARANCES",
+    "MAX_GRASP_WIDTH",
     "MAX_OPENING",
     "WORKSPACE",
     "Grasp",

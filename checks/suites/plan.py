@@ -92,7 +92,7 @@ RULES: tuple[Rule, ...] = (
         check="property.gripper_room",
         text="Every step is one the robot can make as `toolbox.robot.Hand(meshes, "
         "symmetries).can_move` models it: a top-down 2F-85 grasp across two opposite vertical "
-        "faces at most {geometry.hand:plan_grasps.__kwdefaults__[max_width]|mm} apart (the "
+        "faces at most {toolbox.robot:MAX_GRASP_WIDTH|mm} apart (the "
         "jaws open at most {toolbox.robot:MAX_OPENING|mm} and need room on both sides) whose "
         "fingers, finger linkages, gripper base and wrist clear every other object by at least "
         "{geometry.tolerances:TOLERANCES.grasp_margins[-1]|mm} at the pick (the objects as "
