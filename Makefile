@@ -30,10 +30,11 @@ system: ## install and start the system pieces (Docker engine, EGL/Mesa) when mi
 test: venv system sandbox-image ## run the whole test suite (unit, property, sandbox, simulator) and the committed artifacts' property suites
 	$(PY) -m pytest --rivet-artifacts artifacts/
 
-lint: venv ## ruff (lint + format check) and mypy
+lint: venv ## ruff (lint + format check), mypy and the import layering (import-linter)
 	.venv/bin/ruff check .
 	.venv/bin/ruff format --check .
-	.venv/bin/mypy contracts sandbox agent toolbox domains sim artifacts rivet
+	.venv/bin/mypy contracts geometry sandbox agent toolbox domains sim checks artifacts rivet
+	.venv/bin/lint-imports  # the layering, pyproject.toml [tool.importlinter]
 
 format: venv ## apply ruff's formatting and safe fixes
 	.venv/bin/ruff format .
@@ -50,8 +51,8 @@ eval: venv system ## evaluate DOMAIN on its 60 benchmark trials (POLICY=artifact
 bench: venv system sandbox-image ## benchmarks: sandbox overhead, rendering, check mutants
 	$(PY) -m benchmarks.run
 
-bench-checks: venv system sandbox-image ## the mutation benchmark of the check suites
-	$(PY) -m benchmarks.run checks
+bench-checks: venv system sandbox-image ## the mutation benchmark of the check suites, every domain (or DOMAIN=…)
+	$(PY) -m benchmarks.checks_bench $(if $(filter command line environment,$(origin DOMAIN)),--domain $(DOMAIN))
 
 sandbox-base: ## build the offline sandbox base image (debootstrap + docker import)
 	@bash sandbox/build_base.sh

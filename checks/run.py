@@ -89,7 +89,7 @@ def run_checks(
     cases = build_cases(dom, function, budget)
     deps = {k: v for k, v in deps.items() if k in CODE_DEPS[function]}
     own = executor is None
-    ex = sandbox.open_executor("docker") if own else executor
+    ex: sandbox.Executor = sandbox.open_executor("docker") if executor is None else executor
     try:
         if function == "plan" and "relate" in deps:
             _relate_states(ex, deps, cases, spec, budget)
@@ -224,16 +224,16 @@ def _rerender(
             if not session.load.ok:
                 out[case["name"]] = {"error": f"the frozen render did not load ({session.load})"}
                 continue
-            got = CallResult.of(
+            call = CallResult.of(
                 session.call(
                     "render", "render", known, MESHES, case["render_camera"], timeout_s=timeout
                 ),
                 timeout,
             )
             out[case["name"]] = (
-                _rendered(known, got.value)
-                if got.ok
-                else {"error": f"the frozen render {got.describe()}"}
+                _rendered(known, call.value)
+                if call.ok
+                else {"error": f"the frozen render {call.describe()}"}
             )
     return out
 

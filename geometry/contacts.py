@@ -215,15 +215,11 @@ def unstable_objects(
         m = sum(mass[k] for k in load)
         c = sum(mass[k] * com[k] for k in load) / m
         pts = np.concatenate([p for _, p in found[i]])
-        inside = (
-            inside_margin(pts, c[:2]) if len(hull2(pts)) >= 3 else segment_margin(pts, c[:2])
-        )
+        inside = inside_margin(pts, c[:2]) if len(hull2(pts)) >= 3 else segment_margin(pts, c[:2])
         if inside < margin:
             what = "its centre of mass" if len(load) == 1 else "its centre of mass with its load"
             out[name] = f"{what} lies {1000 * -inside:.1f} mm outside its support"
     return out
-
-
 
 
 def scene_problems(
@@ -252,7 +248,7 @@ class Geometry(Mapping[str, Shape]):
         self._shapes = dict(shapes)
 
     @staticmethod
-    def from_parts(parts: Mapping[str, Sequence[object]]) -> Geometry:
+    def from_parts(parts: Mapping[str, Sequence[np.ndarray]]) -> Geometry:
         """Shapes from convex parts: mesh key → vertex arrays (n, 3), one per part."""
         return Geometry({k: Shape.from_pieces(ps) for k, ps in parts.items()})
 

@@ -39,7 +39,9 @@ class Piece:
         try:
             hull = ConvexHull(pts)
         except (QhullError, ValueError) as err:
-            raise DegenerateError(f"a convex piece is degenerate (flat or < 4 points): {err}")
+            raise DegenerateError(
+                f"a convex piece is degenerate (flat or < 4 points): {err}"
+            ) from None
         verts = pts[hull.vertices]
         planes = np.round(hull.equations, 9)
         edges = []
@@ -165,7 +167,9 @@ def body_separation(a: Body, b: Body, *, cutoff: float = np.inf) -> tuple[float,
     return best, axis
 
 
-def bodies_of(records: Sequence[Mapping], pieces_by_mesh: Mapping[str, Sequence[Piece]]) -> list[Body]:
+def bodies_of(
+    records: Sequence[Mapping], pieces_by_mesh: Mapping[str, Sequence[Piece]]
+) -> list[Body]:
     """World bodies of records ``{"id", "mesh", "pose"}``."""
     return [place(r["id"], pieces_by_mesh[r["mesh"]], r["pose"]) for r in records]
 

@@ -64,8 +64,6 @@ def inside_margin(poly_pts: np.ndarray, p: np.ndarray) -> float:
     return float((cross / np.linalg.norm(e, axis=1)).min())
 
 
-
-
 def segment_margin(pts: np.ndarray, p: np.ndarray) -> float:
     h = hull2(pts)
     if len(h) == 0:

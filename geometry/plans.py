@@ -159,19 +159,21 @@ def apply_plan(
             r["pose"], G, trans_tol=trans_tol, rot_tol=rot_tol, symmetries=syms
         ):
             continue
-        t, a = se3.pose_error(r["pose"], G, syms)
+        dist, angle = se3.pose_error(r["pose"], G, syms)
         if rot_tol is None:
-            err = f"{t * 1000:.1f} mm from its goal (tolerance {trans_tol * 1000:.0f} mm)"
+            err = f"{dist * 1000:.1f} mm from its goal (tolerance {trans_tol * 1000:.0f} mm)"
         else:
             err = (
-                f"{t * 1000:.1f} mm and {np.degrees(a):.1f}° from its goal (tolerance "
+                f"{dist * 1000:.1f} mm and {np.degrees(angle):.1f}° from its goal (tolerance "
                 f"{trans_tol * 1000:.0f} mm, {np.degrees(rot_tol):.1f}°)"
             )
-        if worst is None or t > worst[0]:
-            worst = (t, f"'{r['id']}' ends {err}")
+        if worst is None or dist > worst[0]:
+            worst = (dist, f"'{r['id']}' ends {err}")
     if worst is not None:
         return PlanOutcome(
-            problem=PlanProblem(kind="goal", message=f"the plan does not reach the goal: {worst[1]}"),
+            problem=PlanProblem(
+                kind="goal", message=f"the plan does not reach the goal: {worst[1]}"
+            ),
             states=states,
         )
     return PlanOutcome(problem=None, states=states)

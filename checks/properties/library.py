@@ -195,7 +195,7 @@ def _plans(ctx: SuiteContext):
             yield inst, s, g, steps
 
 
-def _states(start: list[dict], steps: list) -> list[tuple[int, str, dict[str, dict]]]:
+def _states(start: list[dict], steps: list) -> list[tuple[int, Any, dict[str, dict]]]:
     """(step, moved object, state after it) for the steps that name known objects."""
     state = {o["id"]: dict(o, pose=np.asarray(o["pose"], float)) for o in start}
     out = []
