@@ -133,3 +133,45 @@ def test_voxel_downsample_and_clustering():
     assert 2 <= len(down) <= 20
     assert v.voxel_downsample(np.zeros((0, 3)), 0.1).shape == (0, 3)
     assert v.cluster_points(np.zeros((0, 3))).shape == (0,)
+
+
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(
+    st.floats(-0.004, 0.004),
+    st.floats(-0.004, 0.004),
+    st.floats(-0.004, 0.004),
+    st.floats(-0.006, 0.006),
+)
+def test_level_camera_on_table_undoes_a_tilt_and_a_height_error(tilt_x, tilt_y, yaw, dz):
+    from contracts import se3
+
+    true = look_at_camera((0.9, -0.3, 0.6), (0.45, 0.0, 0.0), width=240, height=180, f=220.0)
+    depth = plane_depth(true)
+    depth[60:100, 90:150] *= 0.95  # an object standing on the table
+    # the calibrated camera: turned about its centre (tilt and yaw) and raised by dz
+    wrong = dict(true, T_world_camera=np.array(true["T_world_camera"], float))
+    R = se3.rotvec_to_matrix([tilt_x, tilt_y, yaw])
+    wrong["T_world_camera"][:3, :3] = R @ wrong["T_world_camera"][:3, :3]
+    wrong["T_world_camera"][2, 3] += dz
+    fixed = v.level_camera_on_table(depth, wrong)
+    T, F = np.asarray(true["T_world_camera"]), np.asarray(fixed["T_world_camera"])
+    # the table seen through the corrected camera is z = 0 again, and a table point moves
+    # no more than the yaw error (which the table cannot show) accounts for
+    pts = v.depth_to_points(depth, fixed)
+    table = np.abs(pts[:, 2]) < 0.01
+    assert np.abs(np.median(pts[table, 2])) < 2e-4
+    p_true = v.depth_to_points(depth, true)
+    err = np.linalg.norm(pts - p_true, axis=1)
+    reach = np.linalg.norm(p_true[:, :2] - T[:2, 3], axis=1)
+    assert np.all(err < abs(yaw) * reach * 1.2 + 1e-3)
+    assert fixed["K"] is true["K"] or np.allclose(fixed["K"], true["K"])
+    assert not np.allclose(F, np.asarray(wrong["T_world_camera"])) or (
+        max(abs(tilt_x), abs(tilt_y), abs(dz)) < 1e-6
+    )
+
+
+def test_level_camera_on_table_leaves_a_camera_without_a_table_alone():
+    cam = look_at_camera((0.9, -0.3, 0.6), (0.45, 0.0, 0.0), width=120, height=90, f=110.0)
+    wall = plane_depth(cam, (1.0, 0.0, 0.0, -0.3))  # a wall at x = 0.3, no table in view
+    out = v.level_camera_on_table(wall, cam)
+    np.testing.assert_array_equal(out["T_world_camera"], cam["T_world_camera"])

@@ -32,6 +32,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
+from toolbox.vision import level_camera_on_table
 
 PARTS = {  # id → (mesh key, hue of its colour as rendered [deg])
     "pillar_1": ("pillar", 4.0),
@@ -644,6 +645,7 @@ def _choose(parts, shapes, missing_heights):
 def perceive(observation, meshes, camera):
     rgb = np.asarray(observation["rgb"], dtype=np.uint8)
     depth = np.asarray(observation["depth"], dtype=np.float32)
+    camera = level_camera_on_table(depth, camera)  # the table shows the calibration's tilt
     K = np.asarray(camera["K"], dtype=float)
     T_wc = np.asarray(camera["T_world_camera"], dtype=float)
     eye = T_wc[:3, 3]

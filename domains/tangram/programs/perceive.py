@@ -31,6 +31,8 @@ The parallelogram is never mirrored: a mirrored parallelogram does not fit its o
 
 import cv2
 import numpy as np
+
+from toolbox.vision import level_camera_on_table
 from scipy.optimize import least_squares
 
 OBJECTS = {  # id → mesh key, in catalogue order
@@ -336,6 +338,7 @@ class _Sparse:
 def perceive(observation, meshes, camera):
     rgb = np.asarray(observation["rgb"], dtype=np.uint8)
     depth = np.asarray(observation["depth"], dtype=np.float32).astype(float)
+    camera = level_camera_on_table(depth, camera)  # the table shows the calibration's tilt
     view = _View(camera, depth)
     labels = _labels(rgb)
     kernel = np.ones((3, 3), np.uint8)
