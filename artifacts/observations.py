@@ -44,7 +44,13 @@ def write_observation(
 
 
 def read_observation(folder: str | Path) -> dict[str, Any]:
-    """Read an observation folder: {"rgb", "depth" [m], "camera"}."""
+    """Read an observation folder: {"rgb", "depth" [m], "camera"}.
+
+    Raises:
+        ObservationError (a UsageError: exit code 2): a missing or unreadable file, or a
+            `camera.json` that is not a valid observation camera (the contract's message,
+            after the file's name).
+    """
     folder = Path(folder)
     for name in ("rgb.png", "depth.png", "camera.json"):
         if not (folder / name).is_file():
@@ -52,8 +58,11 @@ def read_observation(folder: str | Path) -> dict[str, Any]:
     try:
         cam = json.loads((folder / "camera.json").read_text())
     except json.JSONDecodeError as e:
-        raise ContractError("", f"{folder / 'camera.json'}: not JSON ({e.msg})") from None
-    validate("observation", cam)
+        raise ObservationError(f"{folder / 'camera.json'}: not JSON ({e.msg})") from None
+    try:  # the user's folder (`rivet solve`): an invalid camera is bad input (exit code 2)
+        validate("observation", cam)
+    except ContractError as e:
+        raise ObservationError(f"{folder / 'camera.json'}: {e}") from None
     bgr = cv2.imread(str(folder / "rgb.png"), cv2.IMREAD_COLOR)
     raw = cv2.imread(str(folder / "depth.png"), cv2.IMREAD_UNCHANGED)
     if bgr is None or raw is None or raw.dtype != np.uint16:

@@ -1,54 +1,24 @@
-"""The shared scene representation: typed values, JSON Schemas, one validation entry point.
+"""The shared scene representation: JSON Schemas, one validation entry point, SE(3).
 
-Design rule: types and schemas only — no I/O beyond reading the packaged schema files, no
-simulator, no Docker. Every boundary (sandbox output, artifact load, CLI input) calls
-`validate(kind, value)`.
+Design rule: schemas and plain values only — no I/O beyond reading the packaged schema files,
+no simulator, no Docker. Values are JSON-style dicts and lists (poses may be numpy arrays);
+every boundary (sandbox output, artifact load, CLI input) calls `validate(kind, value)`.
 """
 
 from contracts import se3
-from contracts.errors import ContractError, RivetError, UsageError
-from contracts.types import (
-    Camera,
-    Edge,
-    InfeasiblePlan,
-    Instance,
-    ObjectRecord,
-    ObservationMeta,
-    OkPlan,
-    Plan,
-    PlanStep,
-    RelationGraph,
-    SceneSpec,
-    State,
-    plan_from_dict,
-    records_from_list,
-    records_to_list,
-)
+from contracts.errors import ContractError, InvalidInputError, RivetError, UsageError, user_input
 from contracts.validate import SCHEMA_NAMES, format_path, is_valid, to_jsonable, validate
 
 __all__ = [
     "SCHEMA_NAMES",
-    "Camera",
     "ContractError",
-    "Edge",
-    "InfeasiblePlan",
-    "Instance",
-    "ObjectRecord",
-    "ObservationMeta",
-    "OkPlan",
-    "Plan",
-    "PlanStep",
-    "RelationGraph",
+    "InvalidInputError",
     "RivetError",
-    "SceneSpec",
-    "State",
     "UsageError",
     "format_path",
     "is_valid",
-    "plan_from_dict",
-    "records_from_list",
-    "records_to_list",
     "se3",
     "to_jsonable",
+    "user_input",
     "validate",
 ]

@@ -36,9 +36,7 @@ SIGNATURES: dict[str, Signature] = {
         name="perceive", params=("observation", "meshes", "camera"), returns="records"
     ),
     "relate": Signature(name="relate", params=("records", "meshes"), returns="graph"),
-    "plan": Signature(
-        name="plan", params=("start_state", "goal_state", "meshes"), returns="plan"
-    ),
+    "plan": Signature(name="plan", params=("start_state", "goal_state", "meshes"), returns="plan"),
 }
 
 CODE_DEPS: dict[str, tuple[str, ...]] = {

@@ -3,7 +3,7 @@
 A symmetry `S` maps the mesh onto itself: `mesh(S @ v) == mesh(v)`, so the poses `T` and
 `T @ S` of an object are indistinguishable. Groups are described in the catalogue as small
 dicts and expanded here; every group contains the identity first. Only proper rotations
-appear: a mirror image is not a pose a robot can reach.
+appear: a mirror image is not a pose a robot can reach. The rotations are `contracts.se3`'s.
 
 Descriptions (``centre`` is the fixed point in the object frame [m], default the origin):
 - ``{"kind": "identity"}``
@@ -17,27 +17,28 @@ Descriptions (``centre`` is the fixed point in the object frame [m], default the
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from contracts import se3
+
 _AXES = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
-
-
-def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix (3, 3) about a unit `axis` by `angle` [rad] (Rodrigues)."""
-    axis = np.asarray(axis, dtype=float)
-    axis = axis / np.linalg.norm(axis)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
 
 
 def _perpendicular(axis: np.ndarray) -> np.ndarray:
     other = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
     p = np.cross(axis, other)
     return p / np.linalg.norm(p)
+
+
+def _cube_order(r: np.ndarray) -> tuple:
+    """Identity first, then by decreasing trace; within a trace, by the signed permutation
+    (column of each row's ±1, then its sign): the order the catalogues' groups have always
+    had, so that ties between equivalent poses resolve as before."""
+    cols = tuple(int(np.argmax(np.abs(row))) for row in r)
+    return (-np.trace(r), cols, tuple(bool(row[c] < 0) for row, c in zip(r, cols, strict=True)))
 
 
 def _rotations(desc: Mapping[str, Any]) -> list[np.ndarray]:
@@ -47,27 +48,21 @@ def _rotations(desc: Mapping[str, Any]) -> list[np.ndarray]:
         return [np.eye(3)]
     if kind in ("cyclic", "dihedral"):
         n = int(desc["n"])
-        rots = [rotation(axis, 2 * np.pi * k / n) for k in range(n)]
+        rots = [se3.rotation_about(axis, 2 * np.pi * k / n) for k in range(n)]
         if kind == "dihedral":
             p = _perpendicular(axis)
-            rots += [rotation(rotation(axis, np.pi * k / n) @ p, np.pi) for k in range(n)]
+            rots += [
+                se3.rotation_about(se3.rotation_about(axis, np.pi * k / n) @ p, np.pi)
+                for k in range(n)
+            ]
         return rots
     if kind == "cube":
-        rots = []
-        for perm in itertools.permutations(range(3)):
-            for signs in itertools.product((1.0, -1.0), repeat=3):
-                r = np.zeros((3, 3))
-                for row, (col, sign) in enumerate(zip(perm, signs, strict=True)):
-                    r[row, col] = sign
-                if np.linalg.det(r) > 0:
-                    rots.append(r)
-        rots.sort(key=lambda r: -np.trace(r))  # identity first
-        return rots
+        return sorted((g[:3, :3] for g in se3.cube_group()), key=_cube_order)
     if kind == "revolution":
         steps = int(desc.get("steps", 360))
-        rots = [rotation(axis, 2 * np.pi * k / steps) for k in range(steps)]
+        rots = [se3.rotation_about(axis, 2 * np.pi * k / steps) for k in range(steps)]
         if desc.get("flip", False):
-            flip = rotation(_perpendicular(axis), np.pi)
+            flip = se3.rotation_about(_perpendicular(axis), np.pi)
             rots += [r @ flip for r in rots]
         return rots
     raise ValueError(f"unknown symmetry kind {kind!r}")

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from contracts import se3
+
 
 class DegenerateError(ValueError):
     """A convex piece is flat or has fewer than four points."""
@@ -183,9 +185,7 @@ def yaw_pose(
     x: float, y: float, z: float, yaw: float, base: np.ndarray | None = None
 ) -> np.ndarray:
     """Pose (4, 4) at (x, y, z) [m]: a rotation `yaw` [rad] about world z applied to `base`."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    t = np.eye(4)
-    t[:3, :3] = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    t = se3.rot_z(yaw)
     if base is not None:
         t[:3, :3] = t[:3, :3] @ base[:3, :3]
     t[:3, 3] = (x, y, z)
@@ -194,4 +194,4 @@ def yaw_pose(
 
 def yaw_of(pose: np.ndarray) -> float:
     """Heading [rad] of the object's x axis projected on the table (for upright rotations)."""
-    return float(np.arctan2(pose[1, 0], pose[0, 0]))
+    return se3.yaw(pose)

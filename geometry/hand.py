@@ -373,8 +373,7 @@ def _gripper_hits(
 # -- candidates -----------------------------------------------------------------------------
 
 
-def _yaw_of(R: np.ndarray) -> float:
-    return float(np.arctan2(R[1, 0], R[0, 0]))
+_yaw_of = se3.yaw
 
 
 def _wrap(a: float) -> float:

@@ -130,7 +130,7 @@ class Executor:
     # -- public -----------------------------------------------------------------------------
 
     def execute(self, plan: Any) -> ExecutionResult:
-        """Run `plan` ({"status": "ok", "steps": [...]}, a list of steps, or an OkPlan)."""
+        """Run `plan` ({"status": "ok", "steps": [...]} or a list of steps)."""
         steps = _plan_steps(plan)
         wall0, sim0 = time.perf_counter(), self.data.time
         outcomes: list[StepOutcome] = []

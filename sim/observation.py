@@ -432,7 +432,7 @@ def load_camera(path: str | os.PathLike) -> dict:
         raise CameraFileError(f"{p}: not JSON ({getattr(e, 'msg', e)})") from None
     try:
         return parse_camera(value, where=str(p))
-    except UsageError as e:
+    except (UsageError, ContractError) as e:
         raise CameraFileError(f"{p}: {e}") from None
 
 

@@ -19,6 +19,8 @@ def test_all_names_resolve(name):
 def test_contracts_exports_the_representation():
     import contracts
 
-    assert {"validate", "ContractError", "SceneSpec", "RelationGraph", "se3"} <= set(
+    assert {"validate", "to_jsonable", "ContractError", "SCHEMA_NAMES", "se3"} <= set(
         contracts.__all__
     )
+    # the representation is plain JSON-style values: no typed layer beside the schemas
+    assert not {"SceneSpec", "RelationGraph", "Instance", "plan_from_dict"} & set(dir(contracts))

@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from contracts.errors import UsageError
+from contracts.errors import UsageError, user_input
 from rivet.commands._options import add_sandbox_option
 
 VIEWS = ("front", "view1", "view2")
@@ -44,7 +44,8 @@ def _instances(domain, args: argparse.Namespace) -> list[dict]:
             raise UsageError(f"--instances {args.instances}: no .json instance files")
         out = []
         for f in files:
-            _, inst = load_instance(f)
+            with user_input():  # the user's instance file: a malformed one exits 2
+                _, inst = load_instance(f)
             d = inst.to_dict()
             d["name"] = d.get("name") or f.stem
             out.append(d)

@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from contracts.errors import UsageError
+from contracts.errors import UsageError, user_input
 
 LEVELS = ("clean", "default", "harsh")  # sim.realism.LEVELS (not imported: keeps --help fast)
 VIEWS = ("front", "view1", "view2")
@@ -39,7 +39,8 @@ def _checked(arg: str):
     from sim.scene import load_instance
     from sim.settle import validate_scene
 
-    domain, inst = load_instance(arg)
+    with user_input():  # the user's instance file: a malformed one exits 2
+        domain, inst = load_instance(arg)
     validate_scene(domain, inst.start, where="start")
     validate_scene(domain, inst.goal, where="goal")
     return domain, inst

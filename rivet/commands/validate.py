@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from contracts import SCHEMA_NAMES, validate
-from contracts.errors import UsageError
+from contracts.errors import UsageError, user_input
 
 
 def load_json(path: Path) -> object:
@@ -24,7 +24,8 @@ def load_json(path: Path) -> object:
 
 
 def run(args: argparse.Namespace) -> int:
-    validate(args.kind, load_json(args.file))
+    with user_input():  # the user's file: an invalid one exits 2
+        validate(args.kind, load_json(args.file))
     print(f"{args.file}: valid {args.kind}", file=sys.stdout)
     return 0
 

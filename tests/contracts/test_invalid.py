@@ -10,20 +10,12 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from contracts import ContractError, format_path, validate
-from contracts import strategies as cst
+from contracts import ContractError, format_path, to_jsonable, validate
+from tests.contracts import strategies as cst
 
 EXAMPLES = settings(max_examples=300, deadline=None, derandomize=True)
 
-VALID = {
-    "camera": cst.cameras().map(lambda v: v.to_dict()),
-    "observation": cst.observation_metas().map(lambda v: v.to_dict()),
-    "scene": cst.scenes().map(lambda v: v.to_dict()),
-    "instance": cst.instances().map(lambda v: v.to_dict()),
-    "records": cst.records().map(lambda v: [r.to_dict() for r in v]),
-    "plan": cst.plans().map(lambda v: v.to_dict()),
-    "relations": cst.relation_graphs().map(lambda v: v.to_dict()),
-}
+VALID = {kind: strategy.map(to_jsonable) for kind, strategy in cst.KINDS.items()}
 MATRIX_KEYS = {"pose", "target_pose", "K", "T_world_camera"}
 POSE_KEYS = {"pose", "target_pose", "T_world_camera"}
 # Objects whose fields are open by design (graph/node/edge attributes).

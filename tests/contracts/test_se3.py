@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from contracts import se3
-from contracts.strategies import poses, rotations
+from tests.contracts.strategies import poses, rotations
 
 PROPS = settings(max_examples=300, deadline=None, derandomize=True)
 
@@ -74,7 +74,7 @@ def test_cube_group_has_24_distinct_proper_rotations():
 @PROPS
 @given(poses(), st.integers(1, 8), st.integers(0, 7))
 def test_error_is_zero_modulo_symmetry(T, n, k):
-    group = se3.cyclic_group_z(n)
+    group = se3.cyclic_group(n)
     S = group[k % n]
     assert se3.pose_error(T, T @ S, group) == pytest.approx((0.0, 0.0), abs=1e-6)
     assert se3.within_tolerance(T, T @ S, trans_tol=1e-6, rot_tol=1e-6, symmetries=group)
@@ -95,3 +95,31 @@ def test_error_measures_a_known_offset(T, d, angle):
     assert not se3.within_tolerance(
         T, moved, trans_tol=t_err / 2 if t_err > 0 else -1, rot_tol=None
     )
+
+
+@PROPS
+@given(rotations(), st.floats(1e-9, 1e-3))
+def test_rotation_angle_is_precise_near_zero_and_pi(R, eps):
+    axis = np.array([0.3, -0.5, 0.8])
+    for angle in (eps, np.pi - eps):
+        turn = R @ se3.rotation_about(axis, angle) @ R.T  # the same angle about R's axis
+        assert se3.rotation_angle(turn) == pytest.approx(angle, rel=1e-6, abs=1e-12)
+        assert se3.angle_between(R, turn @ R) == pytest.approx(angle, rel=1e-6, abs=1e-12)
+
+
+@PROPS
+@given(rotations())
+def test_axis_angle_rebuilds_the_rotation(R):
+    axis, angle = se3.axis_angle(R)
+    np.testing.assert_allclose(se3.rotation_about(axis, angle), R, atol=1e-7)
+    np.testing.assert_allclose(se3.rotvec_to_matrix(axis * angle), R, atol=1e-7)
+
+
+def test_cyclic_group_about_any_axis():
+    group = se3.cyclic_group(3, (1.0, 1.0, 0.0))
+    assert len(group) == 3 and np.allclose(group[0], np.eye(4))
+    np.testing.assert_allclose(group[1] @ group[2], np.eye(4), atol=1e-12)
+    with pytest.raises(ValueError, match=">= 1"):
+        se3.cyclic_group(0)
+    with pytest.raises(ValueError, match="zero length"):
+        se3.rotation_about((0, 0, 0), 1.0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import domains
-from domains.symmetry import rotation
+from contracts.se3 import rotation_about as rotation
 from sim.score import final_success, object_error, object_errors, state_accuracy
 
 

@@ -143,3 +143,25 @@ def test_errors_name_the_problem():
         g.make_pose(None, [1, 2])
     with pytest.raises(ToolboxError, match="empty"):
         g.pose_distance(np.eye(4), np.eye(4), [])
+
+
+def test_the_toolbox_wraps_contracts_se3_and_holds_no_maths_of_its_own():
+    # one SE(3) implementation: the programs' names call contracts.se3 (so do the domains'
+    # symmetry groups); none of them computes a rotation itself
+    import ast
+    import inspect
+
+    from domains import symmetry
+
+    for module in (g, symmetry):
+        calls = {
+            node.func.attr
+            for node in ast.walk(ast.parse(inspect.getsource(module)))
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+        }
+        assert not calls & {"sin", "cos", "arctan2", "arccos", "svd", "det"}, module.__name__
+    T = g.make_pose(rotation((0.3, 0.1, -0.5, 0.7)), (0.1, 0.2, 0.3))
+    se3 = pytest.importorskip("contracts.se3")
+    assert tuple(g.pose_distance(T, np.eye(4), g.cube_symmetries())) == se3.pose_error(
+        T, np.eye(4), se3.cube_group()
+    )
