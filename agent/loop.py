@@ -30,7 +30,9 @@ from agent.extract import (
 )
 from agent.journal import Journal
 from agent.prompt import DomainContext, Feedback, build_request
+from agent.report import report_image
 from contracts.functions import CODE_DEPS, authoring_order
+from sandbox.harness.wire import clean_text
 
 
 class Checker(Protocol):
@@ -221,10 +223,12 @@ class AuthoringRun:
             self._say(function, attempt, f"failed: {report.get('first_failure')}")
             if best is None or _score(report) > _score(best.report):
                 best = result
+            images, refused = _report_images(report, self.journal.images_dir(function, attempt))
             feedback = Feedback(
                 draft=source if source is not None else text,
-                report_markdown=markdown,
-                images=_report_images(report, self.journal.images_dir(function, attempt)),
+                report_markdown=markdown
+                + "".join(f"\n\n(Image refused: {why}.)" for why in refused),
+                images=images,
             )
         assert best is not None
         if best.source is not None:
@@ -240,20 +244,25 @@ class AuthoringRun:
         )
 
 
-def _report_images(report: dict, images_dir: Path, limit: int = 4) -> tuple[ImageBlock, ...]:
+def _report_images(
+    report: dict, images_dir: Path, limit: int = 4
+) -> tuple[tuple[ImageBlock, ...], list[str]]:
+    """The images of the failing checks, read only from the check run's own folder
+    (`agent.report.report_image`), and why any other was refused (never read)."""
     out: list[ImageBlock] = []
+    refused: list[str] = []
     for check in report.get("checks", []):
-        if check["status"] not in ("failed", "error"):
+        if check.get("status") not in ("failed", "error"):
             continue
         for image in check.get("images", []):
-            path = Path(image["path"])
-            if not path.is_file():  # paths are relative to where the checks ran, or to the folder
-                path = images_dir / path.name
-            if path.is_file() and len(out) < limit:
-                out.append(
-                    ImageBlock(
-                        png=path.read_bytes(),
-                        caption=f"{check['name']}: {image.get('caption', path.name)}",
-                    )
-                )
-    return tuple(out)
+            if len(out) >= limit or not isinstance(image, dict):
+                continue
+            data, why = report_image(image.get("path"), images_dir)
+            if data is None:
+                refused.append(f"{clean_text(str(check.get('name')))[:100]}: {why}")
+                continue
+            caption = image.get("caption", Path(str(image.get("path"))).name)
+            out.append(
+                ImageBlock(png=data, caption=clean_text(f"{check.get('name')}: {caption}")[:300])
+            )
+    return tuple(out), refused

@@ -1,5 +1,11 @@
 """The HTML report of an authoring run: per function, its attempts, the code diff between
-attempts, the check results, the overlay images and the usage. One self-contained file."""
+attempts, the check results, the overlay images and the usage. One self-contained file.
+
+A check report's image paths are data, not trust: an image is read (here, and by the loop for
+the model) only when its path, symlinks resolved, lies inside that check run's own output
+folder and the file is a PNG of sane size (`report_image`); anything else is refused, said
+so where the image would have been, and never read.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +13,16 @@ import base64
 import difflib
 import html
 import json
+import os
+import stat
 from pathlib import Path
 
 from agent.journal import Journal
 from contracts.functions import FUNCTIONS, authoring_order
+from sandbox.harness.wire import clean_text
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+MAX_IMAGE_BYTES = 16 << 20  # [bytes] an overlay PNG is a few hundred KiB
 
 _CSS = """
 body{font:14px/1.45 system-ui,sans-serif;margin:2em auto;max-width:1100px;color:#222}
@@ -23,9 +35,54 @@ img{max-width:100%;border:1px solid #ddd;margin:4px 0}
 """
 
 
-def _img(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode()
-    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.name)}">'
+def report_image(path: object, folder: Path) -> tuple[bytes | None, str]:
+    """The bytes of the image a check report names, or (None, why it was refused).
+
+    `folder` is the check run's own output folder (where its checks wrote their images). The
+    path may be absolute or relative (to the working directory the checks ran in, or to the
+    folder; a file of the same name in the folder stands in for one recorded elsewhere); it
+    is refused when it holds '..', when it resolves (symlinks followed) outside `folder`, or
+    when what it names is not a regular PNG file of at most `MAX_IMAGE_BYTES`.
+    """
+    if not isinstance(path, str) or not path or "\0" in path:
+        return None, "the image path is not a path"
+    named = Path(path)
+    if ".." in named.parts:
+        return None, f"the image path {clean_text(path)[:200]!r} climbs out with '..'"
+    try:
+        root = folder.resolve(strict=True)
+    except OSError:
+        return None, "the check run's output folder does not exist"
+    where = [named] if named.is_absolute() else [Path.cwd() / named, folder / named]
+    why = f"the image path {clean_text(path)[:200]!r} names no file in the check run's folder"
+    for candidate in [*where, folder / named.name]:
+        try:
+            real = candidate.resolve(strict=True)
+        except (OSError, RuntimeError):  # missing, or a symlink loop
+            continue
+        if not real.is_relative_to(root):
+            why = f"the image path {clean_text(path)[:200]!r} leads outside the check run's folder"
+            continue
+        try:
+            fd = os.open(real, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
+        except OSError:
+            continue
+        with os.fdopen(fd, "rb") as f:
+            info = os.fstat(f.fileno())
+            if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_IMAGE_BYTES:
+                why = f"the image {clean_text(path)[:200]!r} is not a PNG file of sane size"
+                continue
+            data = f.read(MAX_IMAGE_BYTES + 1)
+        if len(data) > MAX_IMAGE_BYTES or not data.startswith(PNG_MAGIC):
+            why = f"the image {clean_text(path)[:200]!r} is not a PNG file of sane size"
+            continue
+        return data, ""
+    return None, why
+
+
+def _img(data: bytes, name: str) -> str:
+    encoded = base64.b64encode(data).decode()
+    return f'<img src="data:image/png;base64,{encoded}" alt="{html.escape(clean_text(name))}">'
 
 
 def write_report(journal: Journal, title: str) -> Path:
@@ -81,13 +138,17 @@ def write_report(journal: Journal, title: str) -> Path:
                 out.append("</table>")
                 for c in report["checks"]:
                     for image in c.get("images", []):
-                        p = Path(image["path"])
-                        if not p.is_file():
-                            p = journal.images_dir(function, k) / p.name
-                        if p.is_file():
+                        if not isinstance(image, dict):
+                            continue
+                        path = image.get("path")
+                        data, why = report_image(path, journal.images_dir(function, k))
+                        label = html.escape(clean_text(f"{c['name']}: {image.get('caption', '')}"))
+                        if data is None:
                             out.append(
-                                f"<p>{html.escape(c['name'])}: {html.escape(image.get('caption', ''))}</p>{_img(p)}"
+                                f"<p class=failed>{label}: image refused: {html.escape(why)}</p>"
                             )
+                        else:
+                            out.append(f"<p>{label}</p>{_img(data, Path(str(path)).name)}")
                 md = journal.saved_markdown(function, k)
                 if md and not report["passed"]:
                     out.append(

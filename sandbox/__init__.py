@@ -38,8 +38,8 @@ BACKENDS = ("docker", "local")
 
 __all__ = [
     "BACKENDS",
-    "VERDICTS",
     "MESHES",
+    "VERDICTS",
     "BadJob",
     "CallReport",
     "Const",

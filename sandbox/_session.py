@@ -319,7 +319,9 @@ class HarnessExecutor(Executor):
                 try:
                     (staged / "src" / f"{name}.py").write_bytes(source.encode())
                 except UnicodeEncodeError as e:
-                    raise BadJob(f"module {name!r}: source is not valid text ({e.reason})") from None
+                    raise BadJob(
+                        f"module {name!r}: source is not valid text ({e.reason})"
+                    ) from None
                 sources[name] = f"src/{name}.py"
             spec: dict[str, Any] = {"sources": sources}
             constants, kinds = dict(program.constants), dict.fromkeys(program.constants, "value")
@@ -336,7 +338,9 @@ class HarnessExecutor(Executor):
                 try:
                     text, blob = wire.encode_value(constants, max_bytes=MAX_INPUT)
                 except wire.BadValue as e:
-                    raise BadJob(f"constant {e.path.replace('$', 'constants', 1)}: {e.problem}") from None
+                    raise BadJob(
+                        f"constant {e.path.replace('$', 'constants', 1)}: {e.problem}"
+                    ) from None
                 (staged / "constants.json").write_bytes(text)
                 if blob:
                     (staged / "constants.npz").write_bytes(blob)
@@ -360,9 +364,7 @@ class HarnessExecutor(Executor):
 class HarnessSession(Session):
     """A session of a `HarnessExecutor` (see `sandbox.base.Session`)."""
 
-    def __init__(
-        self, executor: HarnessExecutor, sid: str, staged: Path, load: CallReport
-    ) -> None:
+    def __init__(self, executor: HarnessExecutor, sid: str, staged: Path, load: CallReport) -> None:
         self.executor = executor
         self.id = sid
         self.staged = staged
@@ -401,7 +403,9 @@ class HarnessSession(Session):
                 {"args": _consts(list(args)), "kwargs": _consts(kwargs)}, max_bytes=MAX_INPUT
             )
         except wire.BadValue as e:
-            raise BadJob(f"call argument {e.path.replace('$', 'arguments', 1)}: {e.problem}") from None
+            raise BadJob(
+                f"call argument {e.path.replace('$', 'arguments', 1)}: {e.problem}"
+            ) from None
         ex = self.executor
         self.calls += 1
         request = {

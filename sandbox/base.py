@@ -375,11 +375,11 @@ def schema_problem(output: Any, schema: Mapping[str, Any]) -> str:
 
 
 def to_jsonable(value: Any, *, max_elements: int | None = None) -> Any:
-    """`value` as plain JSON: arrays as lists (or, above `max_elements`, a summary of their
-    shape and range), non-finite numbers as the strings "NaN"/"Infinity"/"-Infinity" (JSON
+    """`value` as plain JSON: arrays as lists (or, when their lists would hold more than
+    `max_elements` values, `listed_size`, a summary of their shape and range), non-finite numbers as the strings "NaN"/"Infinity"/"-Infinity" (JSON
     has none), strings with control characters and lone surrogates made visible."""
     if isinstance(value, np.ndarray):
-        if max_elements is not None and value.size > max_elements:
+        if max_elements is not None and listed_size(value.shape) > max_elements:
             finite = value[np.isfinite(value)] if value.dtype.kind in "fc" else value
             return {
                 "array": {
@@ -401,10 +401,22 @@ def to_jsonable(value: Any, *, max_elements: int | None = None) -> Any:
     if isinstance(value, str):
         return clean_text(value)
     if isinstance(value, Mapping):
-        return {clean_text(str(k)): to_jsonable(v, max_elements=max_elements) for k, v in value.items()}
+        return {
+            clean_text(str(k)): to_jsonable(v, max_elements=max_elements) for k, v in value.items()
+        }
     if isinstance(value, list | tuple):
         return [to_jsonable(v, max_elements=max_elements) for v in value]
     return value
+
+
+def listed_size(shape: tuple[int, ...]) -> int:
+    """How many values (lists and numbers) an array of this shape becomes as nested lists:
+    an (N, 0) array holds nothing but lists as N empty lists."""
+    total, count = 1, 1
+    for d in shape:
+        count *= max(d, 1)
+        total += count
+    return total
 
 
 def _is_name(name: Any) -> bool:

@@ -3,8 +3,8 @@
 Design rule: nothing is inferred from configuration alone. The probe (`sandbox/harness/probe.py`,
 sent as an ordinary draft) tries each escape from where a draft runs; then real jobs check that
 the limits bite (a sleeper and a spinner that ignores its alarm are killed from outside, a
-memory bomb is stopped, a job that lowers its OOM preference still cannot take the harness
-down, a thread bomb hits the pids limit, an oversized output is refused, a fake secret set on
+memory bomb is stopped, a job that tries to lower its OOM preference and holds memory in a
+memfd still cannot take the harness down, a thread bomb hits the pids limit, an oversized output is refused, a fake secret set on
 the host is not visible) and that two jobs share nothing (scratch files however deep or
 locked, processes). The container's configuration is listed beside them for reference.
 """
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sandbox.base import Job
+from sandbox.base import Job, Program
 from sandbox.docker_backend import DockerExecutor
 from sandbox.harness.server import ENV_KEEP
 
@@ -79,6 +79,7 @@ def _checks(ex: DockerExecutor, canary: str) -> list[Item]:
     items += [_enforced(ex, name, job, want, check) for name, job, want, check in _LIMIT_JOBS]
     items.append(_harness_kept(ex))
     items.append(_nothing_shared(ex))
+    items.append(_memory_fresh(ex))
     items.append(_next_job_works(ex))
     items += _config(ex)
     return items
@@ -94,8 +95,9 @@ def _enforced(ex: DockerExecutor, name: str, job: Job, want: str, check: Any) ->
 
 
 def _harness_kept(ex: DockerExecutor) -> Item:
-    """A job that gives up its OOM preference and exhausts the container's memory with shared
-    pages (which its own memory limit does not count): the job ends, the harness stays."""
+    """A job that tries to give up its OOM preference, then exhausts the container's memory
+    with pages no process's resident size shows (a memfd: neither its memory limit nor the
+    OOM killer's size count them): the job ends, the harness stays."""
     before = ex.restarts
     report = ex.run(Job(source=_OOM_AS_EQUAL, function="f", timeout_s=60))
     after = ex.run(Job(source="def f():\n    return 1\n", function="f"))
@@ -113,7 +115,7 @@ def _nothing_shared(ex: DockerExecutor) -> Item:
     a daemon behind; the next job must find none of it."""
     mess = ex.run(Job(source=_MESS, function="f", timeout_s=60))
     check = ex.run(Job(source=_AFTERCHECK, function="f", timeout_s=30))
-    clean = {"others": [], "tmp": [], "shm": []}
+    clean: dict[str, list[str]] = {"others": [], "tmp": [], "shm": []}
     return Item(
         name="two jobs share no files or processes",
         ok=mess.ok and check.ok and check.output == clean,
@@ -122,20 +124,21 @@ def _nothing_shared(ex: DockerExecutor) -> Item:
 
 
 _OOM_AS_EQUAL = """
-import mmap
+import os
 def f():
-    with open("/proc/self/oom_score_adj", "w") as fh:
-        fh.write("0")
-    maps = []
+    try:
+        with open("/proc/self/oom_score_adj", "w") as fh:
+            fh.write("0")
+    except OSError:
+        pass  # refused: the session's process is non-dumpable, its /proc files root's
+    fd = os.memfd_create("hold")
+    chunk = b"\\1" * (16 << 20)
     while True:
-        m = mmap.mmap(-1, 64 << 20)
-        for i in range(0, len(m), 4096):
-            m[i] = 1
-        maps.append(m)
+        os.write(fd, chunk)
 """
 
 _MESS = """
-import os, subprocess
+import os, time
 def f():
     os.makedirs("/tmp/locked/inner", exist_ok=True)
     open("/tmp/locked/inner/file", "w").write("x")
@@ -149,7 +152,10 @@ def f():
         here = nxt
     os.close(here)
     open("/dev/shm/left", "w").write("x" * 4096)
-    subprocess.Popen(["sleep", "1000"], start_new_session=True)
+    if os.fork() == 0:  # a daemon in a session of its own
+        os.setsid()
+        while True:
+            time.sleep(1)
     return {"tmp": sorted(os.listdir("/tmp")), "shm": sorted(os.listdir("/dev/shm"))}
 """
 
@@ -159,8 +165,62 @@ def f():
     me = os.getpid()
     pids = sorted(int(p) for p in os.listdir("/proc") if p.isdigit())
     tmp = sorted(set(os.listdir("/tmp")) - {os.path.basename(os.getcwd())})
-    return {"others": [p for p in pids if p not in (1, me)], "tmp": tmp,
+    spare = (1, me, os.getppid())  # the harness and the template this process was forked from
+    return {"others": [p for p in pids if p not in spare], "tmp": tmp,
             "shm": sorted(os.listdir("/dev/shm"))}
+"""
+
+
+def _memory_fresh(ex: DockerExecutor) -> Item:
+    """A session gets a random marker as an argument, returns it, prints it and raises it;
+    the next session searches its whole memory for it and must not find it (sessions are
+    forked from the template, which never sees any session's data)."""
+    marker = f"{MEMORY_MARK}{secrets.token_hex(16)}"
+    with ex.open_session(Program(modules={"hold": _HOLD})) as session:
+        for fn in ("echo", "fail"):
+            session.call("hold", fn, marker, timeout_s=10)
+    scan = ex.run(Job(source=MEMORY_SCAN, function="scan", timeout_s=60))
+    found = scan.output.get("found", []) if scan.ok else []
+    return Item(
+        name="a session's memory holds nothing of earlier sessions",
+        ok=scan.ok and marker[len(MEMORY_MARK) :] not in found and scan.output["bytes"] > 0,
+        detail=f"scan {scan.verdict} {scan.detail[:80]}: "
+        + (
+            f"{scan.output['bytes'] >> 20} MiB searched, marker found: "
+            f"{marker[len(MEMORY_MARK) :] in found}"
+            if scan.ok
+            else ""
+        ),
+    )
+
+
+MEMORY_MARK = "RIVET-MEMORY-"
+_HOLD = """
+def echo(x):
+    print(x)
+    return x
+def fail(x):
+    raise ValueError(x)
+"""
+# Searches every anonymous (heap, stack, mapped) region of its own process for markers; the
+# pattern is written so that it does not match its own text.
+MEMORY_SCAN = """
+import ctypes, re
+def scan():
+    pattern = re.compile(rb"RIVET[-]MEMORY[-]([0-9a-f]{32})")
+    found, total = set(), 0
+    with open("/proc/self/maps") as f:
+        regions = [line.split() for line in f]
+    for fields in regions:
+        lo, hi = (int(x, 16) for x in fields[0].split("-"))
+        path = fields[5] if len(fields) > 5 else ""
+        if not fields[1].startswith("rw") or path not in ("", "[heap]", "[stack]"):
+            continue
+        for start in range(lo, hi, 64 << 20):
+            data = ctypes.string_at(start, min(hi, start + (64 << 20) + 64) - start)
+            total += len(data)
+            found.update(m.group(1).decode() for m in pattern.finditer(data))
+    return {"found": sorted(found), "bytes": total}
 """
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import ctypes.util as ctypes_util
 import fcntl
 import importlib
 import importlib.abc
@@ -30,6 +31,8 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from . import wire
+from .lockdown import find_library, make_undumpable
+from .lockdown import install as install_filter
 
 RESULT_FD = 3
 REQUEST_FD = 4
@@ -53,10 +56,16 @@ def serve(
     memory_mb: int,
     output_limit: int,
     request_limit: int,
+    lockdown: bool = False,
+    template_pid: int = 0,
 ) -> NoReturn:
-    """Set the child up, load the program, answer calls until the request pipe closes."""
+    """Set the child up, load the program, answer calls until the request pipe closes.
+
+    With `lockdown` (inside the container) the process ends its setup non-dumpable under its
+    own seccomp filter (`lockdown`), protecting the template `template_pid` and PID 1.
+    """
     try:
-        _isolate(result_fd, request_fd, out_fd, err_fd, memory_mb)
+        _isolate(result_fd, request_fd, out_fd, err_fd, memory_mb, lockdown, template_pid)
         os.chdir(tmp_dir)
         os.environ["TMPDIR"] = os.environ["HOME"] = tmp_dir
         tempfile.tempdir = None
@@ -93,10 +102,19 @@ def _next_request(reader: wire.FrameReader) -> tuple[dict[str, Any], list[bytes]
         reader.feed(data)
 
 
-def _isolate(result_fd: int, request_fd: int, out_fd: int, err_fd: int, memory_mb: int) -> None:
-    """Own session, only the descriptors it needs, default signals, a memory limit."""
+def _isolate(
+    result_fd: int,
+    request_fd: int,
+    out_fd: int,
+    err_fd: int,
+    memory_mb: int,
+    lockdown: bool = False,
+    template_pid: int = 0,
+) -> None:
+    """Own session, only the descriptors it needs, default signals, a memory limit; with
+    `lockdown`, non-dumpable under the session filter."""
     # The harness is non-dumpable (so jobs cannot reach into it) and a fork inherits that;
-    # the program itself may be dumpable, which gives it back its own /proc/self files.
+    # the process is dumpable for as long as it needs to write its own /proc files.
     ctypes.CDLL(None).prctl(_PR_SET_DUMPABLE, 1, 0, 0, 0)
     os.setsid()
     # Every end moves above the fixed numbers first, so that no dup2 below clobbers another.
@@ -112,12 +130,20 @@ def _isolate(result_fd: int, request_fd: int, out_fd: int, err_fd: int, memory_m
         with open("/proc/self/oom_score_adj", "w") as f:
             f.write("1000")
     except OSError:
-        pass
+        if lockdown:  # the harness's safety rests on it
+            raise
     # RLIMIT_DATA counts what the program allocates (heap, anonymous maps), not the address
     # space of the shared libraries the harness already mapped.
     data = _status_kib("VmData") * 1024 + memory_mb * (1 << 20)
     resource.setrlimit(resource.RLIMIT_DATA, (data, data))
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    if lockdown:
+        # Its /proc files (oom_score_adj among them) become root's, and the filter keeps it
+        # so: no prctl(PR_SET_DUMPABLE, 1), no exec. Then nothing it starts can lower its OOM
+        # preference below the harness's, or signal the template or PID 1.
+        make_undumpable()
+        install_filter(template_pid)
+        ctypes_util.find_library = find_library  # the standard one runs programs
 
 
 def _status_kib(key: str) -> int:
@@ -180,7 +206,7 @@ class _Program:
         return wire.pack_frame({"status": "returned"}, [text, blob])
 
     def _module(self, header: Mapping[str, Any]) -> Any:
-        module = self.modules.get(header.get("module"))
+        module = self.modules.get(str(header.get("module")))
         if module is None:
             raise ImportError(f"the program has no module {header.get('module')!r}")
         return module
@@ -213,7 +239,7 @@ class _Program:
         return {"callable": callable(fn), "params": params, "functions": functions}
 
     def _function(self, header: Mapping[str, Any]) -> Any:
-        module = self.modules.get(header.get("module"))
+        module = self.modules.get(str(header.get("module")))
         if module is None:
             raise ImportError(f"the program has no module {header.get('module')!r}")
         name = str(header.get("function"))

@@ -161,8 +161,11 @@ def _env(inputs: dict[str, Any]) -> tuple[bool, str]:
     canary = str(inputs.get("canary", ""))
     extra = sorted(set(os.environ) - set(inputs.get("env_keep", [])) - {"HOME", "TMPDIR"})
     secretish = sorted(k for k in os.environ if any(s in k.upper() for s in _SECRETISH))
-    with open("/proc/self/environ", "rb") as f:
-        initial = f.read()
+    try:  # a session's process is non-dumpable in the container: its environ is root's
+        with open("/proc/self/environ", "rb") as f:
+            initial = f.read()
+    except PermissionError:
+        initial = b""
     leaked = bool(canary) and (canary in str(dict(os.environ)) or canary.encode() in initial)
     ok = not extra and not secretish and not leaked
     return (
@@ -223,12 +226,67 @@ def _mount(_: dict[str, Any]) -> tuple[bool, str]:
 def _signal_harness(_: dict[str, Any]) -> tuple[bool, str]:
     import signal
 
-    if os.getppid() != 1:  # never signal PID 1 outside the container (the local backend)
-        return False, "not inside the sandbox container (the parent is not PID 1); skipped"
+    if not _in_container():  # never signal PID 1 outside the container (the local backend)
+        return False, "not inside the sandbox container (PID 1 is not the harness); skipped"
     os.kill(1, signal.SIGKILL)  # a no-op for PID 1 of the namespace, which has no handler
     os.kill(1, signal.SIGTERM)
     alive = os.path.exists("/proc/1/stat")
     return alive, f"harness (PID 1) alive after SIGKILL and SIGTERM from the job: {alive}"
+
+
+def _in_container() -> bool:
+    try:
+        with open("/proc/1/cmdline", "rb") as f:
+            return b"sandbox.harness.server" in f.read()
+    except OSError:
+        return False
+
+
+def _exec(_: dict[str, Any]) -> tuple[bool, str]:
+    import subprocess
+
+    return _fails(subprocess.run, ["/bin/true"])
+
+
+def _template_unreachable(_: dict[str, Any]) -> tuple[bool, str]:
+    """Signal 0 (a permission test that delivers nothing) to the template and to everyone,
+    reading the template's limits, and asking for I/O signals to be sent to it."""
+    import fcntl
+    import resource
+
+    if not _in_container():
+        return False, "not inside the sandbox container; skipped"
+    template = os.getppid()
+    out = []
+    for what, fn in (
+        ("kill(template, 0)", lambda: os.kill(template, 0)),
+        ("kill(-1, 0)", lambda: os.kill(-1, 0)),
+        ("prlimit(template)", lambda: resource.prlimit(template, resource.RLIMIT_NOFILE)),
+        ("prlimit(1)", lambda: resource.prlimit(1, resource.RLIMIT_NOFILE)),
+    ):
+        ok, why = _fails(fn)
+        out.append((ok, f"{what}: {why}"))
+    r, w = os.pipe()
+    try:
+        ok, why = _fails(fcntl.fcntl, r, fcntl.F_SETOWN, template)
+        out.append((ok, f"F_SETOWN(template): {why}"))
+    finally:
+        os.close(r)
+        os.close(w)
+    return all(ok for ok, _ in out), "; ".join(w for _, w in out)
+
+
+def _oom_locked(_: dict[str, Any]) -> tuple[bool, str]:
+    if not _in_container():
+        return False, "not inside the sandbox container; skipped"
+    try:
+        with open("/proc/self/oom_score_adj", "w") as f:
+            f.write("0")
+    except OSError as e:
+        return True, f"writing 0 to its oom_score_adj: {type(e).__name__}: {e.strerror}"
+    with open("/proc/self/oom_score_adj", "w") as f:
+        f.write("1000")
+    return False, "the job lowered its OOM preference to 0"
 
 
 def _denied(rc: int, err: int) -> bool:
@@ -261,7 +319,7 @@ def _socket_families(_: dict[str, Any]) -> tuple[bool, str]:
             out.append(f"{name} opened")
         except OSError as e:
             ok = ok and e.errno in (errno.EPERM, errno.EACCES)
-            out.append(f"{name}: {errno.errorcode.get(e.errno, e.errno)}")
+            out.append(f"{name}: {errno.errorcode.get(e.errno or 0, str(e.errno))}")
     return ok, "; ".join(out)
 
 
@@ -305,8 +363,11 @@ def _oom_preference(_: dict[str, Any]) -> tuple[bool, str]:
         with open(f"/proc/{pid}/oom_score_adj") as f:
             return int(f.read())
 
-    own, harness = read("self"), read("1")
-    return own > harness, f"this process {own}, the harness (PID 1) {harness}"
+    own, harness, template = read("self"), read("1"), read(str(os.getppid()))
+    return (
+        own > harness and own > template,
+        f"this process {own}, the harness (PID 1) {harness}, the template {template}",
+    )
 
 
 _PROBES: list[tuple[str, Callable[[dict[str, Any]], tuple[bool, str]]]] = [
@@ -335,4 +396,7 @@ _PROBES: list[tuple[str, Callable[[dict[str, Any]], tuple[bool, str]]]] = [
     ("new namespaces denied", _namespaces),
     ("IPC namespace", _ipc_namespace),
     ("the OOM killer prefers the program to the harness", _oom_preference),
+    ("the program cannot lower its OOM preference", _oom_locked),
+    ("programs cannot be executed", _exec),
+    ("the template and PID 1 out of reach (signals, limits, I/O owners)", _template_unreachable),
 ]

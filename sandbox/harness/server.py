@@ -1,14 +1,18 @@
 """The fork server: PID 1 of the sandbox container (or, for the local backend, a subprocess).
 
-Design rule: heavy modules are imported once here; every program runs in a fresh forked child
-(a *session*: load once, answer many calls), and this process alone decides each call's verdict
+Design rule: heavy modules are imported once, by the template (`template`: the first thing this
+process forks, before it reads any request); every program runs in a fresh process the template
+forks (a *session*: load once, answer many calls), so no session starts with anything of an
+earlier one in its memory. This process relays requests and answers and alone decides each
+call's verdict
 from what it observes: the time from request to answer (it kills the child when the call's
 budget runs out, whatever the child does with its signals), the exit status, the cgroup's OOM
 counter, the size and shape of the one answer frame per call. It talks to the host over its
 stdin/stdout with length-prefixed frames (`wire`); the child never holds those descriptors, and
 this process is non-dumpable, so the child cannot open them through /proc, ptrace it or read its
 memory. As PID 1 of its PID namespace it ignores every signal sent from inside the container.
-When a session closes it kills every other process in the container, removes every System V
+When a session closes it kills every other process in the container (the template excepted),
+removes every System V
 and POSIX IPC object, and wipes the scratch file systems within a time bound; a wipe that
 cannot finish says so and the host replaces the container.
 
@@ -24,9 +28,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import ctypes
-import importlib
 import os
-import pkgutil
 import select
 import signal
 import stat
@@ -35,6 +37,9 @@ import time
 from typing import Any
 
 from . import child, wire
+from .template import PRELOAD_SUBMODULES, Template, TemplateGone
+
+__all__ = ["DEFAULT_PRELOAD", "ENV_KEEP", "PRELOAD_SUBMODULES", "Server", "main", "wipe"]
 
 DEFAULT_PRELOAD = (
     "numpy",
@@ -55,8 +60,6 @@ DEFAULT_PRELOAD = (
     "geometry",
     "toolbox",
 )
-# Packages whose submodules are preloaded too (the project's own, small and pure Python).
-PRELOAD_SUBMODULES = ("contracts", "geometry", "toolbox")
 # The only environment variables programs see; everything else is dropped at start.
 ENV_KEEP = (
     "PATH",
@@ -85,18 +88,27 @@ _IPC_RMID = 0
 
 
 class Server:
-    """One fork server; `serve` answers requests until the host closes the channel."""
+    """One fork server; `serve` answers requests until the host closes the channel.
+
+    Session processes are forked by the `template` (started before this process reads any
+    request), never by this process: see `sandbox.harness.template`.
+    """
 
     def __init__(
-        self, *, chan_in: int, chan_out: int, local: bool, tmp_root: str, preload: list[str]
+        self,
+        *,
+        chan_in: int,
+        chan_out: int,
+        local: bool,
+        tmp_root: str,
+        preload: list[str],
+        template: Template,
     ) -> None:
         self.chan_in, self.chan_out = chan_in, chan_out
         self.local = local
         self.tmp_root = tmp_root
-        self.pending = list(preload)
-        self.preloaded: list[str] = []
-        self.preload_errors: dict[str, str] = {}
-        self.preload_s = 0.0
+        self.preload = list(preload)
+        self.template = template
         self.reader = wire.FrameReader(MAX_CALL + wire.MAX_HEADER + 4096)
         self.in_pid1 = os.getpid() == 1 and not local
         self.sessions = 0
@@ -115,27 +127,51 @@ class Server:
         while True:
             for frame in self.reader.frames():
                 return frame
+            watched: list[Any] = [self.chan_in, self.template.sock]
+            ready = select.select(watched, [], [])[0]
+            if self.template.sock in ready:
+                self.template.poll()  # raises TemplateGone when the template ended
+            if self.chan_in not in ready:
+                continue
             data = os.read(self.chan_in, READ_CHUNK)
             if not data:
                 return None
             self.reader.feed(data)
 
     def serve(self) -> None:
+        try:
+            self._serve()
+        except TemplateGone as e:
+            self._fatal(str(e))
+
+    def _fatal(self, why: str) -> None:
+        """The template is gone, so no session can start or end cleanly: kill every process
+        this harness is answerable for and exit (the host starts a fresh harness)."""
+        with contextlib.suppress(OSError):
+            if self.session is not None:
+                self.session.kill()
+            if self.in_pid1:
+                os.kill(-1, signal.SIGKILL)
+            else:
+                for p in _children(os.getpid()):
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(p, signal.SIGKILL)
+        with contextlib.suppress(OSError):
+            os.write(2, f"sandbox harness: {why}; exiting\n".encode())
+        os._exit(3)
+
+    def _serve(self) -> None:
         self.send(
             {
                 "kind": "hello",
                 "pid": os.getpid(),
                 "python": sys.version.split()[0],
                 "local": self.local,
-                "pending": list(self.pending),
+                "pending": list(self.preload),
+                "template": self.template.pid,
             }
         )
         while True:
-            # preload between sessions only: a session's child would not see the modules, and
-            # its calls would wait for them
-            if self.pending and self.session is None and not _readable(self.chan_in, 0):
-                self._preload_next()
-                continue
             got = self._request()
             if got is None:
                 if self.session is not None:
@@ -150,81 +186,62 @@ class Server:
                     self.send(*self.call(req, sections))
                 elif kind == "close":
                     self.send(self._close_session(req.get("id")))
-                elif kind == "warm":
-                    while self.pending:
-                        self._preload_next()
-                    self.send(self.status())
-                elif kind == "status":
-                    self.send(self.status())
+                elif kind in ("warm", "status"):
+                    self.send(self.status(warm=kind == "warm"))
                 else:
                     self.send({"kind": "error", "error": f"unknown request kind {kind!r:.40}"})
             except (OSError, ValueError, KeyError, TypeError) as e:  # a failure of ours
                 detail = f"harness error: {type(e).__name__}: {e}"[:500]
                 self.send({"kind": "error", "id": req.get("id"), "error": detail})
 
-    def status(self) -> dict[str, Any]:
+    def status(self, *, warm: bool = False) -> dict[str, Any]:
+        got = self.template.ask("warm" if warm else "status", 600.0 if warm else 60.0)
         return {
             "kind": "status",
-            "preloaded": self.preloaded,
-            "pending": self.pending,
-            "errors": self.preload_errors,
-            "preload_s": round(self.preload_s, 3),
+            "preloaded": got.get("preloaded", []),
+            "pending": got.get("pending", []),
+            "errors": got.get("errors", {}),
+            "preload_s": got.get("preload_s", 0.0),
             "sessions": self.sessions,
             "pid1": self.in_pid1,
+            "template": self.template.pid,
             "dirty": self.dirty,
         }
-
-    def _preload_next(self) -> None:
-        name = self.pending.pop(0)
-        t0 = time.perf_counter()
-        try:
-            module = importlib.import_module(name)
-            if name == "cv2":
-                module.setNumThreads(1)  # threads created before fork would be lost in the child
-            if name in PRELOAD_SUBMODULES and hasattr(module, "__path__"):
-                subs = [f"{name}.{m.name}" for m in pkgutil.iter_modules(module.__path__)]
-                self.pending[:0] = [s for s in subs if s not in sys.modules]
-            self.preloaded.append(name)
-        except BaseException as e:  # a broken module must not take the harness down
-            self.preload_errors[name] = f"{type(e).__name__}: {e}"[:500]
-        self.preload_s += time.perf_counter() - t0
 
     # ---------------------------------------------------------------------------- sessions
 
     def open_session(self, req: dict[str, Any]) -> dict[str, Any]:
-        """Fork a child that loads the program; answer once it is ready (or failed)."""
+        """Have the template fork a process that loads the program; answer once it is ready
+        (or failed)."""
         if self.session is not None:
             return {"kind": "error", "id": req.get("id"), "error": "a session is already open"}
         self.sessions += 1
         tmp_dir = self._session_tmp()
         pipes = {name: os.pipe() for name in ("res", "req", "out", "err")}
         output_limit = int(req["output_limit"])
-        sys.stdout.flush()
-        sys.stderr.flush()
-        base_rss = _status_kib("RssAnon")  # what a forked child starts with, roughly
+        load_timeout = float(req["load_timeout_s"])
         oom_before = _oom_kills()
         t0 = time.monotonic()
-        pid = os.fork()
-        if pid == 0:
-            try:
-                child.serve(
-                    program_dir=str(req["dir"]),
-                    tmp_dir=tmp_dir,
-                    result_fd=pipes["res"][1],
-                    request_fd=pipes["req"][0],
-                    out_fd=pipes["out"][1],
-                    err_fd=pipes["err"][1],
-                    memory_mb=int(req["memory_mb"]),
-                    output_limit=output_limit,
-                    request_limit=MAX_CALL + wire.MAX_HEADER + 4096,
-                )
-            finally:
-                os._exit(70)
-        for end in (pipes["res"][1], pipes["req"][0], pipes["out"][1], pipes["err"][1]):
-            os.close(end)
+        theirs = [pipes["res"][1], pipes["req"][0], pipes["out"][1], pipes["err"][1]]
+        try:
+            spawned = self.template.spawn(
+                {
+                    "dir": str(req["dir"]),
+                    "tmp_dir": tmp_dir,
+                    "memory_mb": int(req["memory_mb"]),
+                    "output_limit": output_limit,
+                    "request_limit": MAX_CALL + wire.MAX_HEADER + 4096,
+                },
+                theirs,
+                timeout=max(load_timeout, 60.0),
+            )
+        finally:
+            for end in theirs:
+                os.close(end)
         self.session = _Child(
             id=req.get("id"),
-            pid=pid,
+            pid=int(spawned["pid"]),
+            template=self.template,
             res_r=pipes["res"][0],
             req_w=pipes["req"][1],
             out_r=pipes["out"][0],
@@ -232,11 +249,11 @@ class Server:
             result_cap=output_limit + wire.MAX_HEADER + 4096,
             tail=int(req.get("tail_bytes", 8192)),
             tmp_dir=tmp_dir,
-            base_rss=base_rss,
+            base_rss=int(spawned.get("base_rss", 0)),
             started=t0,
             in_container=self.in_pid1,
         )
-        head, _ = self.session.exchange(None, [], float(req["load_timeout_s"]), oom_before)
+        head, _ = self.session.exchange(None, [], load_timeout, oom_before)
         head.update(kind="opened", id=req.get("id"), load_s=round(time.monotonic() - t0, 6))
         if head.get("verdict") == "returned":
             head["verdict"] = "ok"
@@ -267,7 +284,7 @@ class Server:
         if s is None or (sid is not None and s.id != sid):
             return {"kind": "error", "id": sid, "error": "no such open session"}
         s.kill()
-        rusage = s.reap()
+        ended = s.reap()
         self._kill_leftovers()
         s.drain()
         s.close_fds()
@@ -276,13 +293,14 @@ class Server:
         left = self._cleanup(s.tmp_dir)
         if left:
             self.dirty = left
+        self.template.closed()  # wiped: the template may import again
         return {
             "kind": "closed",
             "id": s.id,
             "wall_s": round(time.monotonic() - s.started, 6),
             "wipe_s": round(time.monotonic() - t_wipe, 6),
-            "peak_memory_mb": round(max(0, rusage.ru_maxrss - s.base_rss) / 1024, 3)
-            if rusage is not None
+            "peak_memory_mb": round(max(0, ended[1] - s.base_rss) / 1024, 3)
+            if ended is not None
             else None,
             "stdout_tail": s.out.text(),
             "stderr_tail": s.err.text(),
@@ -298,27 +316,49 @@ class Server:
 
     def _kill_leftovers(self) -> None:
         """Kill whatever the program started (threads died with it; processes may have
-        escaped into their own sessions)."""
+        escaped into their own sessions), sparing only the template."""
+        spare = {os.getpid(), self.template.pid}
         for _ in range(1000):
             alive = False
             if self.in_pid1:
-                try:  # every process in the container but this one; stopped first, so that
-                    os.kill(-1, signal.SIGSTOP)  # a fork bomb cannot outrun the killing
-                    os.kill(-1, signal.SIGKILL)
-                    alive = True
-                except ProcessLookupError:
-                    pass
+                # every process in the container but this one, stopped first so that a fork
+                with contextlib.suppress(ProcessLookupError):  # bomb cannot outrun the killing
+                    os.kill(-1, signal.SIGSTOP)
+                for p in _live_pids():
+                    if p not in spare:
+                        with contextlib.suppress(ProcessLookupError):
+                            os.kill(p, signal.SIGKILL)
+                            alive = True
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(self.template.pid, signal.SIGCONT)
             else:  # as a subreaper, orphaned descendants become children of this process
                 for p in _children(os.getpid()):
+                    if p in spare:
+                        continue
                     try:
                         os.kill(p, signal.SIGKILL)
                         alive = True
                     except ProcessLookupError:
                         pass
-            reaped = _reap_all()
+            reaped = self._reap_all()
             if not alive and not reaped:
                 return
             time.sleep(0.001)
+
+    def _reap_all(self) -> int:
+        """Reap every child that ended (orphans the container's init adopted); the template
+        among them means the harness cannot go on."""
+        n = 0
+        while True:
+            try:
+                pid, _ = os.waitpid(-1, os.WNOHANG)
+            except ChildProcessError:
+                return n
+            if pid == 0:
+                return n
+            if pid == self.template.pid:
+                raise TemplateGone("the template process ended")
+            n += 1
 
     def _cleanup(self, tmp_dir: str) -> str:
         """Remove what the session left: IPC objects, scratch files. '' when all is gone,
@@ -360,6 +400,7 @@ class _Child:
         *,
         id: Any,
         pid: int,
+        template: Template,
         res_r: int,
         req_w: int,
         out_r: int,
@@ -372,6 +413,7 @@ class _Child:
         in_container: bool,
     ) -> None:
         self.id, self.pid = id, pid
+        self.template = template
         self.req_w = req_w
         self.result_cap = result_cap
         self.tmp_dir, self.base_rss, self.started = tmp_dir, base_rss, started
@@ -383,9 +425,10 @@ class _Child:
         for fd in self.fds:
             os.set_blocking(fd, False)
             self.poll.register(fd, select.POLLIN)
+        self.poll.register(template.fileno(), select.POLLIN)  # wakes when the process ends
         os.set_blocking(req_w, False)
         self.status: int | None = None
-        self.rusage: Any = None
+        self.peak_kib = 0  # peak resident memory of the process [KiB], known once it ended
         self.dead = ""  # why the session can answer no more calls
         self.in_container = in_container
 
@@ -409,9 +452,9 @@ class _Child:
         frame, over_cap = None, False
         while True:
             if self.status is None:
-                pid, status, rusage = os.wait4(self.pid, os.WNOHANG)
-                if pid:
-                    self.status, self.rusage = status, rusage
+                ended = self.template.exit_of(self.pid)
+                if ended is not None:
+                    self.status, self.peak_kib = ended
             frame, over_cap = self._frame()
             if frame is not None or over_cap or self.status is not None:
                 break
@@ -421,9 +464,9 @@ class _Child:
                 self.reap()
                 seconds = time.monotonic() - t0
                 self._die(f"killed after the {timeout:.3g} s budget of a call")
-                head = self._verdict("timeout", f"killed after the {timeout:.3g} s time budget")
-                head["seconds"] = round(seconds, 6)
-                return head, []
+                late = self._verdict("timeout", f"killed after the {timeout:.3g} s time budget")
+                late["seconds"] = round(seconds, 6)
+                return late, []
             if pending:
                 try:
                     n = os.write(self.req_w, pending[: 1 << 16])
@@ -503,7 +546,7 @@ class _Child:
             return {"verdict": "returned"}, list(sections)
         if status == "raised" and _valid_exception(frame.get("exception")):
             exc = frame["exception"]
-            head = {
+            head: dict[str, Any] = {
                 "exception": {
                     k: wire.clean_text(exc[k][: 2 * child.MAX_TRACEBACK])
                     for k in ("type", "message", "traceback")
@@ -570,11 +613,15 @@ class _Child:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(self.pid, signal.SIGKILL)
 
-    def reap(self) -> Any:
+    def reap(self) -> tuple[int, int] | None:
+        """Wait until the template reports the process ended (it was sent SIGKILL):
+        (wait status, peak RSS [KiB]), None when it did not say in time."""
         if self.status is None:
-            with contextlib.suppress(ChildProcessError):
-                _, self.status, self.rusage = os.wait4(self.pid, 0)
-        return self.rusage
+            ended = self.template.wait_exit(self.pid, 30.0)
+            if ended is None:
+                raise TemplateGone(f"the template did not report the end of process {self.pid}")
+            self.status, self.peak_kib = ended
+        return self.status, self.peak_kib
 
     def drain(self) -> None:
         for fd in list(self.fds):
@@ -609,10 +656,8 @@ def wipe(root: str, deadline: float, *, keep_root: bool = True) -> str:
         while True:
             if time.monotonic() > deadline:
                 return f"not wiped within {WIPE_BUDGET_S:g} s ({len(names)} levels deep)"
-            entry = None
             with os.scandir(cur) as it:
-                for entry in it:
-                    break
+                entry = next(iter(it), None)
             if entry is None:  # empty: go up and remove it
                 if not names:
                     break
@@ -682,16 +727,20 @@ def _readable(fd: int, timeout: float) -> bool:
     return bool(select.select([fd], [], [], timeout)[0])
 
 
-def _reap_all() -> int:
-    n = 0
-    while True:
+def _live_pids() -> list[int]:
+    """Every process of the PID namespace that has not ended (zombies left out)."""
+    out = []
+    for name in os.listdir("/proc"):
+        if not name.isdigit():
+            continue
         try:
-            pid, _ = os.waitpid(-1, os.WNOHANG)
-        except ChildProcessError:
-            return n
-        if pid == 0:
-            return n
-        n += 1
+            with open(f"/proc/{name}/stat") as f:
+                state = f.read().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            continue
+        if state not in ("Z", "X"):
+            out.append(int(name))
+    return out
 
 
 def _children(ppid: int) -> list[int]:
@@ -733,7 +782,10 @@ def _cgroup_cpu_seconds() -> float | None:
                     return int(line.split()[1]) / 1e6
     except OSError:
         pass
-    for path in ("/sys/fs/cgroup/cpuacct/cpuacct.usage", "/sys/fs/cgroup/cpu,cpuacct/cpuacct.usage"):
+    for path in (
+        "/sys/fs/cgroup/cpuacct/cpuacct.usage",
+        "/sys/fs/cgroup/cpu,cpuacct/cpuacct.usage",
+    ):
         try:
             with open(path) as f:
                 return int(f.read()) / 1e9
@@ -785,6 +837,17 @@ def main(argv: list[str] | None = None) -> int:
     _prctl(_PR_SET_DUMPABLE, 0)
     if args.local:
         _prctl(_PR_SET_CHILD_SUBREAPER, 1)
+    # `python -m` puts the working directory (the scratch root, which programs write) first
+    # on the module path: nothing is ever imported from there, by the harness, the template
+    # (which imports between sessions) or a session.
+    scratch, cwd = os.path.realpath(args.tmp), os.path.realpath(os.getcwd())
+    sys.path[:] = [
+        p
+        for p in sys.path
+        if p
+        and os.path.realpath(p) != cwd
+        and os.path.commonpath([scratch, os.path.realpath(p)]) != scratch
+    ]
     keep = {k: os.environ[k] for k in ENV_KEEP if k in os.environ}
     os.environ.clear()
     os.environ.update(keep, HOME=args.tmp, TMPDIR=args.tmp)
@@ -796,8 +859,17 @@ def main(argv: list[str] | None = None) -> int:
         preload = []
     else:
         preload = [m for m in args.preload.split(",") if m]
+    # The template is forked before anything is read from the host: see `template`.
+    template = Template.start(
+        preload=preload, close=(chan_in, chan_out), lockdown=os.getpid() == 1 and not args.local
+    )
     server = Server(
-        chan_in=chan_in, chan_out=chan_out, local=args.local, tmp_root=args.tmp, preload=preload
+        chan_in=chan_in,
+        chan_out=chan_out,
+        local=args.local,
+        tmp_root=args.tmp,
+        preload=preload,
+        template=template,
     )
     with contextlib.suppress(BrokenPipeError):
         server.serve()

@@ -323,6 +323,12 @@ def _npy_header(f: Any, member_size: int, name: str) -> tuple[tuple[int, ...], n
         if count > MAX_ARRAY_ELEMENTS:
             raise BadValue(f"arrays[{name}]", f"array shape {shape} is too large")
     nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if nbytes == 0 and count > MAX_ELEMENTS:  # no bytes pay for it: bounded like JSON values
+        raise BadValue(
+            f"arrays[{name}]",
+            f"empty array of shape {shape} is refused: it holds nothing, but listing it would "
+            f"take {count} lists (more than {MAX_ELEMENTS})",
+        )
     if f.tell() + nbytes != member_size:
         raise BadValue(
             f"arrays[{name}]",
