@@ -5,13 +5,15 @@ For a domain's hand-written reference programs (`domains/<domain>/programs/`):
   reports must be identical once timings are left out (no flakiness);
 - every mutant of `domains/<domain>/mutants.toml` (a reference program with a planted bug) is
   checked once: it must be rejected; the table says by which check.
-Targets (issue 6): at least 95 % of mutants rejected, zero rejections of the correct programs.
+Targets (issues 6, 16): in each domain at least 95 % of mutants rejected, zero rejections
+of the correct programs.
 
 Usage:
-    python -m benchmarks.checks_bench [--domain cubes] [--repeats 10] [--sandbox docker|local]
-        [--only NAME[,NAME…]] [--out DIR]
-Writes DIR/bench_checks.md (the table) and DIR/bench_checks.json; exit 0 when both targets
-are met, 1 otherwise, 2 for a broken catalogue.
+    python -m benchmarks.checks_bench [--domain all|cubes|tangram|assembly] [--repeats 10]
+        [--sandbox docker|local] [--only NAME[,NAME…]] [--out DIR]
+Writes DIR/bench_checks.md (the table) and DIR/bench_checks.json — with `--domain all` (the
+default) one DIR/<domain>/ of each per domain and the per-domain totals in DIR; exit 0 when
+both targets are met in every domain, 1 otherwise, 2 for a broken catalogue.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import statistics
 import sys
 import time
 import tomllib
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -106,9 +109,14 @@ def failing(report: dict) -> list[str]:
     return [c["name"] for c in report["checks"] if not passes(c)]
 
 
+DOMAINS = ("cubes", "tangram", "assembly")  # `--domain all`, in this order
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.checks_bench", description=__doc__)
-    parser.add_argument("--domain", default="cubes")
+    parser.add_argument(
+        "--domain", default="all", help=f"a domain, or 'all' ({', '.join(DOMAINS)}; the default)"
+    )
     parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--sandbox", choices=("docker", "local"), default="docker")
     parser.add_argument("--only", default="", help="comma-separated mutant names (no repeats)")
@@ -116,94 +124,153 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     import sandbox
-    from checks import comparable
 
-    refs = programs(args.domain)
-    try:
-        mutants = load_mutants(catalogue(args.domain), refs)
-    except CatalogueError as e:
-        print(f"broken catalogue: {e}", file=sys.stderr)
-        return 2
+    names = list(DOMAINS) if args.domain == "all" else [args.domain]
+    loaded: dict[str, tuple[dict[str, str], list[Mutant]]] = {}
     only = {n for n in args.only.split(",") if n}
+    for domain in names:
+        refs = programs(domain)
+        try:
+            mutants = load_mutants(catalogue(domain), refs)
+        except CatalogueError as e:
+            print(f"broken catalogue: {e}", file=sys.stderr)
+            return 2
+        if only:
+            mutants = [m for m in mutants if m.name in only]
+        loaded[domain] = (refs, mutants)
     if only:
-        unknown = only - {m.name for m in mutants}
+        unknown = only - {m.name for _, ms in loaded.values() for m in ms}
         if unknown:
             print(f"unknown mutants {sorted(unknown)}", file=sys.stderr)
             return 2
-        mutants = [m for m in mutants if m.name in only]
     args.out.mkdir(parents=True, exist_ok=True)
+    summaries = []
+    ok = True
+    with sandbox.open_executor(args.sandbox) as ex:
+        for domain, (refs, mutants) in loaded.items():
+            if only and not mutants:
+                continue
+            out = args.out / domain if len(names) > 1 else args.out
+            summary, good = bench_domain(domain, refs, mutants, args, ex, out, only=bool(only))
+            summaries.append(summary)
+            ok = ok and good
+    if len(names) > 1:
+        (args.out / "bench_checks.json").write_text(json.dumps({"domains": summaries}, indent=1))
+        md = render_totals(summaries)
+        (args.out / "bench_checks.md").write_text(md)
+        print()
+        print(md)
+    return 0 if ok else 1
+
+
+def bench_domain(
+    domain: str,
+    refs: dict[str, str],
+    mutants: list[Mutant],
+    args: argparse.Namespace,
+    ex: Any,
+    out: Path,
+    *,
+    only: bool,
+) -> tuple[dict[str, Any], bool]:
+    """One domain's benchmark: its correct programs `args.repeats` times, each mutant once;
+    writes OUT/bench_checks.{md,json}; (summary, both targets met)."""
+    from checks import comparable
+
+    out.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
     times: list[float] = []
     correct_rows: list[dict[str, Any]] = []
     mutant_rows: list[dict[str, Any]] = []
-    with sandbox.open_executor(args.sandbox) as ex:
-        repeats = 0 if only else args.repeats
-        for fn in FUNCTIONS if repeats else ():
-            reports = []
-            for k in range(repeats):
-                report, dt = check(args.domain, fn, refs[fn], refs, ex, args.out / "images" / fn)
-                times.append(dt)
-                reports.append(report)
-                print(
-                    f"{fn} run {k + 1}/{repeats}: {'pass' if report['passed'] else 'REJECTED'} "
-                    f"{failing(report)} ({dt:.1f} s)",
-                    flush=True,
-                )
-            identical = all(comparable(r) == comparable(reports[0]) for r in reports)
-            correct_rows.append(
-                {
-                    "function": fn,
-                    "runs": repeats,
-                    "rejections": sum(not r["passed"] for r in reports),
-                    "identical_reports": identical,
-                    "rejected_by": sorted({n for r in reports for n in failing(r)}),
-                }
-            )
-        for m in mutants:
-            report, dt = check(
-                args.domain, m.function, m.source, refs, ex, args.out / "images" / m.name
-            )
+    repeats = 0 if only else args.repeats
+    for fn in FUNCTIONS if repeats else ():
+        reports = []
+        for k in range(repeats):
+            report, dt = check(domain, fn, refs[fn], refs, ex, out / "images" / fn)
             times.append(dt)
-            fails = failing(report)
-            mutant_rows.append(
-                {
-                    "mutant": m.name,
-                    "function": m.function,
-                    "bug": m.bug,
-                    "caught": not report["passed"],
-                    "first_failure": report["first_failure"],
-                    "failing": fails,
-                    "seconds": round(dt, 1),
-                }
-            )
+            reports.append(report)
             print(
-                f"{m.name}: {'caught by ' + str(report['first_failure']) if fails else 'MISSED'} "
-                f"({dt:.1f} s)",
+                f"{domain} {fn} run {k + 1}/{repeats}: "
+                f"{'pass' if report['passed'] else 'REJECTED'} {failing(report)} ({dt:.1f} s)",
                 flush=True,
             )
+        identical = all(comparable(r) == comparable(reports[0]) for r in reports)
+        correct_rows.append(
+            {
+                "function": fn,
+                "runs": repeats,
+                "rejections": sum(not r["passed"] for r in reports),
+                "identical_reports": identical,
+                "rejected_by": sorted({n for r in reports for n in failing(r)}),
+            }
+        )
+    for m in mutants:
+        report, dt = check(domain, m.function, m.source, refs, ex, out / "images" / m.name)
+        times.append(dt)
+        fails = failing(report)
+        mutant_rows.append(
+            {
+                "mutant": m.name,
+                "function": m.function,
+                "bug": m.bug,
+                "caught": not report["passed"],
+                "first_failure": report["first_failure"],
+                "failing": fails,
+                "seconds": round(dt, 1),
+            }
+        )
+        print(
+            f"{domain} {m.name}: "
+            f"{'caught by ' + str(report['first_failure']) if fails else 'MISSED'} ({dt:.1f} s)",
+            flush=True,
+        )
     caught = sum(r["caught"] for r in mutant_rows)
     rate = caught / len(mutant_rows) if mutant_rows else 1.0
     false_rejections = sum(r["rejections"] for r in correct_rows)
+    first = Counter(r["first_failure"] for r in mutant_rows if r["caught"])
     summary = {
-        "domain": args.domain,
+        "domain": domain,
         "mutants": len(mutant_rows),
         "caught": caught,
         "caught_rate": round(rate, 4),
+        "caught_by_first": dict(sorted(first.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "mutants_per_function": dict(Counter(r["function"] for r in mutant_rows)),
         "correct_runs": sum(r["runs"] for r in correct_rows),
         "false_rejections": false_rejections,
         "all_reports_identical": all(r["identical_reports"] for r in correct_rows),
         "seconds_per_check_median": round(statistics.median(times), 1) if times else None,
         "seconds_per_check_max": round(max(times), 1) if times else None,
+        "wall_s": round(time.perf_counter() - t_start, 1),
         "sandbox": args.sandbox,
     }
-    (args.out / "bench_checks.json").write_text(
+    (out / "bench_checks.json").write_text(
         json.dumps({"summary": summary, "correct": correct_rows, "mutants": mutant_rows}, indent=1)
     )
     md = render_markdown(summary, correct_rows, mutant_rows)
-    (args.out / "bench_checks.md").write_text(md)
+    (out / "bench_checks.md").write_text(md)
     print()
     print(md)
-    ok = rate >= TARGET_CAUGHT and false_rejections == 0 and summary["all_reports_identical"]
-    return 0 if ok else 1
+    good = rate >= TARGET_CAUGHT and false_rejections == 0 and summary["all_reports_identical"]
+    return summary, good
+
+
+def render_totals(summaries: list[dict]) -> str:
+    """The per-domain figures in one table."""
+    lines = [
+        "# Checks mutation benchmark: every domain",
+        "",
+        "| domain | mutants | rejected | correct runs | false rejections | identical reports "
+        "| wall time | caught first by |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for s in summaries:
+        by = ", ".join(f"`{k}` {v}" for k, v in s["caught_by_first"].items())
+        lines.append(
+            f"| {s['domain']} | {s['mutants']} | {s['caught']} ({100 * s['caught_rate']:.1f} %) "
+            f"| {s['correct_runs']} | {s['false_rejections']} | {s['all_reports_identical']} "
+            f"| {s['wall_s']:.0f} s | {by} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def render_markdown(summary: dict, correct: list[dict], mutants: list[dict]) -> str:
@@ -216,7 +283,9 @@ def render_markdown(summary: dict, correct: list[dict], mutants: list[dict]) -> 
         f"{summary['correct_runs']} runs** (target 0); identical reports on repeats: "
         f"{summary['all_reports_identical']}",
         f"- time per full check: median {summary['seconds_per_check_median']} s, max "
-        f"{summary['seconds_per_check_max']} s",
+        f"{summary['seconds_per_check_max']} s; wall time {summary['wall_s']:.0f} s",
+        "- caught first by: "
+        + (", ".join(f"`{k}` {v}" for k, v in summary["caught_by_first"].items()) or "(none)"),
         "",
     ]
     if correct:

@@ -296,8 +296,7 @@ def turns_about_vertical(ctx: SuiteContext) -> CheckResult:
             R_from, R_to = before[oid][:3, :3], state[oid]["pose"][:3, :3]
             syms = ctx.spec.symmetries.get(state[oid]["mesh"], [np.eye(4)])
             tilt = min(
-                float(np.arccos(np.clip((R_to @ S[:3, :3] @ R_from.T)[2, 2], -1, 1)))
-                for S in syms
+                float(np.arccos(np.clip((R_to @ S[:3, :3] @ R_from.T)[2, 2], -1, 1))) for S in syms
             )
             if tilt > YAW_ONLY_TOL:
                 return _plan_failure(
@@ -322,7 +321,7 @@ def no_stacking(ctx: SuiteContext) -> CheckResult:
     n = 0
     for inst, s, g, steps in _plans(ctx):
         n += 1
-        for k, oid, state in _states(s, steps):
+        for k, _oid, state in _states(s, steps):
             sup = supports(list(state.values()), ctx.spec.geometry)
             for who, on in sup.items():
                 others = [x for x in on if x != "table"]

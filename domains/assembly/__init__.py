@@ -22,7 +22,7 @@ from domains.assembly.dimensions import ARCH_H, BEAM, BLOCK, CYL_H, L_FOOT, PILL
 from domains.base import Domain
 from domains.errors import GenerationError
 from domains.registry import register
-from geometry import place, yaw_pose
+from geometry import TOLERANCES, place, yaw_pose
 
 MESH = {
     "pillar_1": "pillar",
@@ -137,6 +137,31 @@ class Assembly(Domain):
     }
     on_gap = 0.008
     adjacent_gap = 0.005
+    properties = {  # noqa: RUF012
+        "perceive": [
+            ("resting_pose", {"tolerance_deg": 5.0}),
+            (
+                "physically_valid",
+                {
+                    "penetration": TOLERANCES.perceived_penetration,
+                    "contact": TOLERANCES.perceived_contact,
+                },
+            ),
+        ],
+        "relate": [
+            (
+                "relations_match_geometry",
+                {"kind": "on", "meaning": "(upper part → part it rests on)"},
+            ),
+            ("support_acyclic", {"kind": "on"}),
+        ],
+        "plan": [
+            ("turns_about_vertical", {}),
+            ("supporters_first", {}),
+            ("stable_with_loads", {}),
+            ("temporary_clear_of_goals", {}),
+        ],
+    }
 
     def make_goal(
         self, rng: np.random.Generator, index: int | None, split: str = "dev"

@@ -22,7 +22,7 @@ from domains.base import Domain
 from domains.errors import GenerationError
 from domains.registry import register
 from domains.tangram.figures import OBJECTS, UNIT
-from geometry import Body, Workspace, place, yaw_of, yaw_pose
+from geometry import TOLERANCES, Body, Workspace, place, yaw_of, yaw_pose
 
 # Benchmark goal k uses the k-th figure (goal 1, the reference, is the square); free draws
 # use any figure. Test goal k uses the k-th test figure; free test draws any test figure.
@@ -52,6 +52,28 @@ class Tangram(Domain):
     on_gap = 0.005
     adjacent_gap = 0.008
     temp_clearance = 0.03
+    properties = {  # noqa: RUF012
+        "perceive": [
+            ("never_mirrored", {"meshes": ["parallelogram"]}),
+            ("ids_follow_the_image", {}),
+            ("no_overlap", {"penetration": TOLERANCES.perceived_penetration}),
+        ],
+        "relate": [
+            (
+                "relations_match_geometry",
+                {
+                    "kind": "adjacent",
+                    "meaning": "(two pieces touching edge to edge or corner to corner, both ways)",
+                },
+            ),
+        ],
+        "plan": [
+            ("turns_about_vertical", {}),
+            ("no_stacking", {}),
+            ("never_mirrored", {"meshes": ["parallelogram"]}),
+            ("temporary_clear_of_goals", {}),
+        ],
+    }
 
     @cached_property
     def figures(self) -> dict[str, dict]:
