@@ -8,7 +8,7 @@ committed artifacts' property suites in CI.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import pytest
 
@@ -80,7 +80,7 @@ class CheckFailed(Exception):
 
 
 class CheckItem(pytest.Item):
-    _executors: ClassVar[dict[str, object]] = {}
+    _executors: ClassVar[dict[str, Any]] = {}
 
     def __init__(self, *, domain: str, function: str, **kw) -> None:
         super().__init__(**kw)
@@ -89,9 +89,8 @@ class CheckItem(pytest.Item):
         self.program = function
 
     def runtest(self) -> None:
-        from contracts.checks import report_markdown, run_checks
-
         from artifacts.store import verify
+        from checks import report_markdown, run_checks
 
         _, sources = verify(self.domain, self.path.parent.parent)
         backend = self.config.getoption("--rivet-sandbox")

@@ -253,7 +253,7 @@ def level_camera_on_table(
     """
     D = check_image(depth, camera, "depth", ndim=2)
     stride = max(1, int(np.sqrt(D.size / 12000)))
-    pts = depth_to_points(D, camera, stride=stride)
+    pts = np.asarray(depth_to_points(D, camera, stride=stride))
     P = pts[np.abs(pts[:, 2]) < band] if len(pts) else pts
     if len(P) < min_points:
         return dict(camera)

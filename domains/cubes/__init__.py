@@ -136,7 +136,7 @@ class Cubes(Domain):
     }
     on_gap = 0.008
     adjacent_gap = 0.012
-    properties = {
+    properties = {  # noqa: RUF012
         "relate": [
             (
                 "relations_match_geometry",

@@ -201,12 +201,9 @@ def _match(model, R, t, pts, eye):
         (cell[:, 0] * model.grid_shape[1] + cell[:, 1]) * model.grid_shape[2] + cell[:, 2]
     ]
     view = (eye - pts) @ R  # towards the camera, object frame
-    nrm = model.normals[idx]  # (n, k, 3)
-    facing = (
-        nrm[..., 0] * view[:, :1] + nrm[..., 1] * view[:, 1:2] + nrm[..., 2] * view[:, 2:]
-    ) > 0
+    facing = np.einsum("nkd,nd->nk", model.normals[idx], view) > 0
     diff = model.samples[idx] - q[:, None, :]
-    d2 = (diff * diff).sum(axis=2) + ~facing  # a sample turned away only when no other is near
+    d2 = np.einsum("nkd,nkd->nk", diff, diff) + ~facing  # turned away: only when nothing is near
     first = d2.argmin(axis=1)
     rows = np.arange(len(pts))
     j = idx[rows, first]

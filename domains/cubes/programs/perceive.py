@@ -16,9 +16,9 @@ points of each face.
 
 import cv2
 import numpy as np
+from scipy.optimize import least_squares
 
 from toolbox.vision import level_camera_on_table
-from scipy.optimize import least_squares
 
 HUES = {  # catalogue colour → hue [deg] as rendered
     "red": 0.0,

@@ -31,9 +31,9 @@ The parallelogram is never mirrored: a mirrored parallelogram does not fit its o
 
 import cv2
 import numpy as np
+from scipy.optimize import least_squares
 
 from toolbox.vision import level_camera_on_table
-from scipy.optimize import least_squares
 
 OBJECTS = {  # id → mesh key, in catalogue order
     "large_1": "large_triangle",
