@@ -30,9 +30,7 @@ def test_eval_trials_fan_out_to_ray_actors(tmp_path, local_ray):
     for name, src in PROGRAMS.items():
         (tmp_path / f"{name}.py").write_text(src)
     d = domains.load("cubes")
-    instances = [
-        d.benchmark_instance(g, 1, physics=physical_problems).to_dict() for g in (1, 2, 3)
-    ]
+    instances = [d.benchmark_instance(g, 1, physics=physical_problems).to_dict() for g in (1, 2, 3)]
     config = EvalConfig(domain="cubes", policy=("programs", str(tmp_path)))
     summary = run_eval(config, instances, workers=2, ray_address=local_ray)
     assert [t["name"] for t in summary["per_trial"]] == [i["name"] for i in instances]

@@ -151,8 +151,6 @@ def test_plan_checks_and_trial_scoring_share_one_penetration_tolerance(depth_mm,
         symmetries=spec.symmetries,
         workspace=spec.workspace,
     )
-    trial = check_order(
-        d, d.scene(start), steps, d.scene(goal), physics=False
-    )
+    trial = check_order(d, d.scene(start), steps, d.scene(goal), physics=False)
     assert check.ok is accepted, check.problem
     assert (trial == []) is accepted, trial
