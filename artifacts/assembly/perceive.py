@@ -32,6 +32,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
+from toolbox.vision import level_camera_on_table
 
 PARTS = {  # id → (mesh key, hue of its colour as rendered [deg])
     "pillar_1": ("pillar", 4.0),
@@ -200,12 +201,9 @@ def _match(model, R, t, pts, eye):
         (cell[:, 0] * model.grid_shape[1] + cell[:, 1]) * model.grid_shape[2] + cell[:, 2]
     ]
     view = (eye - pts) @ R  # towards the camera, object frame
-    nrm = model.normals[idx]  # (n, k, 3)
-    facing = (
-        nrm[..., 0] * view[:, :1] + nrm[..., 1] * view[:, 1:2] + nrm[..., 2] * view[:, 2:]
-    ) > 0
+    facing = np.einsum("nkd,nd->nk", model.normals[idx], view) > 0
     diff = model.samples[idx] - q[:, None, :]
-    d2 = (diff * diff).sum(axis=2) + ~facing  # a sample turned away only when no other is near
+    d2 = np.einsum("nkd,nkd->nk", diff, diff) + ~facing  # turned away: only when nothing is near
     first = d2.argmin(axis=1)
     rows = np.arange(len(pts))
     j = idx[rows, first]
@@ -644,6 +642,7 @@ def _choose(parts, shapes, missing_heights):
 def perceive(observation, meshes, camera):
     rgb = np.asarray(observation["rgb"], dtype=np.uint8)
     depth = np.asarray(observation["depth"], dtype=np.float32)
+    camera = level_camera_on_table(depth, camera)  # the table shows the calibration's tilt
     K = np.asarray(camera["K"], dtype=float)
     T_wc = np.asarray(camera["T_world_camera"], dtype=float)
     eye = T_wc[:3, 3]

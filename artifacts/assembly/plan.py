@@ -1,7 +1,7 @@
 # Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
 # the assembly domain, the level a model's program should reach. It uses numpy and the
 # toolbox's exact polyhedral geometry (toolbox.stability).
-"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal structure.
+"""plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal structure.
 
 The parts' shapes come from the task's dimensions as convex pieces (the arch: two legs and
 sixteen slabs over its half-round opening; the L-block: foot and leg), so support, collision
@@ -23,12 +23,14 @@ with everything resting only on it must keep its joint centre of mass over its s
    a blocking part to a free temporary place on the table with room for the fingers (the top
    of a stack in the way, a part squatting on a goal spot). Every intermediate state is
    checked: nothing picked while loaded, no collision, every part stable.
-4. The gripper (a Robotiq 2F-85 from above, modelled as boxes for fingers, couplers, base and
-   wrist per grasp of each part): a move is made only with one grasp that has room at the
-   pick and at the place, and when it takes no grasp away from a part still to move; parts in
-   the fingers' way go aside first. Preferences, never dead ends: a placement that would wall
-   in a goal place still to fill waits, and a temporary place is one from which the part can
-   be taken on to its goal. When no order satisfies the gripper, the geometric order stands.
+4. The gripper (a Robotiq 2F-85 from above): a move is made only when the robot's own hand
+   model (`toolbox.robot.Hand`, the one its executor and the plan checks use) finds one grasp
+   with room at the pick and at the place, and when it takes no grasp away from a part still
+   to move; parts in the fingers' way go aside first. Preferences, never dead ends: a
+   placement that would wall in a goal place still to fill waits, and a temporary place is one
+   from which the part can be taken on to its goal. When no order satisfies the gripper, the
+   geometric order stands. Goals must lie inside the robot's workspace
+   (`toolbox.robot.WORKSPACE`); temporary places keep well inside it.
 """
 
 import itertools
@@ -37,6 +39,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
+from toolbox.robot import WORKSPACE, Hand
 
 DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
@@ -45,14 +48,11 @@ SAME_ANGLE = np.radians(4.0)
 TILT = np.radians(20.0)  # a goal orientation farther than this from every resting pose
 GOAL_OVERLAP = 0.003  # goal parts may interpenetrate this much (perception noise) [m]
 TOUCH = 0.001  # a placement may touch others this deep [m]
-# temporary places: the robot's comfortable reach in front of it [m]
-REGION_X = (0.32, 0.68)
-REGION_Y = (-0.27, 0.27)
-REACH = 0.72
-# the reachable workspace: no part of a goal may leave it [m]
-WORK_X = (0.25, 0.75)
-WORK_Y = (-0.35, 0.35)
-WORK_REACH = 0.78
+# temporary places keep this far inside the robot's workspace, where the arm is comfortable [m]
+INSIDE = 0.07
+REGION_X = (WORKSPACE.x[0] + INSIDE, WORKSPACE.x[1] - INSIDE)
+REGION_Y = (WORKSPACE.y[0] + INSIDE, WORKSPACE.y[1] - INSIDE)
+REACH = WORKSPACE.reach - INSIDE
 GRID = 0.01  # spacing of candidate temporary places [m]
 CLEARANCES = ((0.03, 0.01), (0.015, 0.005), (0.008, 0.0))  # (to parts, to unbuilt goals) [m]
 
@@ -117,87 +117,7 @@ SYMMETRY = {
 SHAPES = {k: Shape.from_pieces(v) for k, v in PIECES.items()}
 REST = {k: [p.rotation for p in stable_poses(s)] for k, s in SHAPES.items()}
 
-# -- the gripper: a Robotiq 2F-85 coming down from above ---------------------------------------
-# Its jaws close on two opposite vertical faces at most 80 mm apart; every part has such pairs
-# across its 30–50 mm side (the cylinder: across its diameter, any way round). The fingers
-# and the wrist above them need room beside the part at the pick and at the place alike.
-OPENING = 0.008  # jaw opening beyond the part's width, per side, for the approach [m]
-GRIP_MARGIN = 0.002  # clearance kept from the neighbours [m]
 FINGER_ROOM = 0.05  # a part moved out of the fingers' way keeps this far from them [m]
-# how the gripper takes each part, in the part's frame: (closing axis, width, fingertip
-# heights, positions along the faces) [m] — the pads (22 mm wide, 37.5 mm tall) sit on both
-# faces where both are flat over the pad, low (3 mm above the table), or as low as the free
-# height between the fingers allows for tall parts, or high on the faces; centred on the
-# part, and along long faces also off-centre (to dodge a neighbour)
-FACES = {
-    "pillar": [((1, 0), 0.03, (0.0259, 0.065), (0.0,)), ((0, 1), 0.03, (0.0259, 0.065), (0.0,))],
-    "beam": [((0, 1), DEPTH, (0.003, 0.005), (0.0, -0.0345, 0.0345, -0.069, 0.069))],
-    "block": [
-        ((0, 1), DEPTH, (0.003, 0.015), (0.0, -0.007, 0.007, -0.014, 0.014)),
-        ((1, 0), 0.05, (0.003, 0.015), (0.0, -0.0065, 0.0065)),
-    ],
-    "arch": [
-        ((0, 1), DEPTH, (0.0114,), (-0.041, 0.041, -0.049)),
-        ((0, 1), DEPTH, (0.05,), (0.0, -0.0245, 0.0245, -0.049, 0.049)),
-    ],
-    "roof": [((0, 1), DEPTH, (0.003, 0.025), (0.0,))],
-    "cylinder": [
-        ((np.cos(a), np.sin(a)), 0.04, (0.0069, 0.045), (0.0,)) for a in np.arange(8) * np.pi / 8
-    ],
-    "lblock": [((0, 1), DEPTH, (0.0165, 0.055), (-0.021, -0.029))],
-}
-
-
-def _finger_boxes(opening, flip):
-    """The gripper as boxes in a grasp frame: origin between the fingertips, a along the
-    closing direction, b along the faces, z up [m]; the wrist and arm above it lean to one
-    side, mirrored with `flip`."""
-    g = opening / 2
-    boxes = []
-    for side in (-1.0, 1.0):
-        for a0, a1, b, z0, z1 in (
-            (g, g + 0.017, 0.012, 0.0, 0.04),
-            (g, g + 0.033, 0.017, 0.04, 0.06),
-            (g, max(g + 0.0315, 0.064), 0.02, 0.06, 0.12),
-        ):
-            boxes.append((sorted((side * a0, side * a1)), (-b, b), (z0, z1)))
-    boxes.append(((-0.038, 0.038), (-0.038, 0.038), (0.12, 0.16)))
-    boxes.append(
-        (sorted((flip * -0.042, flip * 0.082)), sorted((flip * -0.082, flip * 0.042)), (0.16, 0.6))
-    )
-    out = []
-    for (a0, a1), (b0, b1), (z0, z1) in boxes:
-        a0, a1, b0, b1 = a0 - GRIP_MARGIN, a1 + GRIP_MARGIN, b0 - GRIP_MARGIN, b1 + GRIP_MARGIN
-        z0 -= GRIP_MARGIN
-        out.append(np.array([(a, b, z) for a in (a0, a1) for b in (b0, b1) for z in (z0, z1)]))
-    return Shape.from_pieces(out)
-
-
-_FINGERS = {}
-
-
-def _fingers(opening, flip):
-    key = (round(opening, 4), flip)
-    if key not in _FINGERS:
-        _FINGERS[key] = _finger_boxes(opening, flip)
-    return _FINGERS[key]
-
-
-def _grasps(mesh):
-    """Candidate grasps of a part in its own frame: (closing axis (3,), along-face axis (3,),
-    position on the mid-plane (3,) at the fingertips' height, jaw opening, wrist side)."""
-    out = []
-    for (ax, ay), width, tips, us in FACES.get(mesh, []):
-        a = np.array([ax, ay, 0.0]) / np.hypot(ax, ay)
-        b = np.array([-a[1], a[0], 0.0])
-        for tip in tips:
-            for u in us:
-                for flip in (1.0, -1.0):
-                    out.append((a, b, u * b + [0.0, 0.0, tip], width + 2 * OPENING, flip))
-    return out
-
-
-GRASPS = {k: _grasps(k) for k in PIECES}
 SLOT_TRIES = 40  # temporary places tried for one that leaves goal places room and the
 # part a grasp onwards to its goal
 
@@ -345,7 +265,7 @@ def _snap_goal(goal, mesh):
         a, b, depth = hits[0]
         return None, f"'{a}' and '{b}' overlap by {1000 * depth:.0f} mm in the goal"
     for i, T in placed.items():
-        if not _in_region(_footprint(mesh[i], T), WORK_X, WORK_Y, WORK_REACH):
+        if not _in_region(_footprint(mesh[i], T), WORKSPACE.x, WORKSPACE.y, WORKSPACE.reach):
             return None, f"'{i}' is out of the robot's reach in the goal"
     bad = unstable_objects(recs, SHAPES, contact_tol=0.002, margin=-0.002)
     if bad:
@@ -357,12 +277,12 @@ def _snap_goal(goal, mesh):
 class _World:
     """The current poses, with the support relation of the state cached."""
 
-    def __init__(self, poses, mesh):
-        self.poses, self.mesh = dict(poses), mesh
+    def __init__(self, poses, mesh, hand):
+        self.poses, self.mesh, self.hand = dict(poses), mesh, hand
         self._sup = None
 
     def moved(self, i, T):
-        w = _World(self.poses, self.mesh)
+        w = _World(self.poses, self.mesh, self.hand)
         w.poses[i] = T
         return w
 
@@ -395,32 +315,19 @@ class _World:
         return not unstable_objects(_records(self.poses, self.mesh), SHAPES, contact_tol=0.002)
 
 
-def _grip_blockers(world, i, T, grasp):
-    """Parts of `world` (other than i) that the gripper holding part i at pose T by `grasp`
-    would touch; [] when it has room."""
-    a, b, p, opening, flip = grasp
-    R = T[:3, :3]
-    G = np.eye(4)
-    G[:3, 0], G[:3, 1] = R @ a, R @ b
-    G[:3, 3] = R @ p + T[:3, 3]
-    fingers = _fingers(opening, flip)
-    lo = G[:3, 3] - [0.13, 0.13, 0.0]
-    hi = G[:3, 3] + [0.13, 0.13, 1.0]
-    out = []
-    for j, U in sorted(world.poses.items()):
-        if j == i:
-            continue
-        _, _, lo_j, hi_j = _geometry(world.mesh[j], U)
-        if np.any(lo_j > hi) or np.any(hi_j < lo):
-            continue
-        if separation(fingers, G, SHAPES[world.mesh[j]], U, cutoff=0.0)[0] < 0.0:
-            out.append(j)
-    return out
+_HANDS = {}  # mesh keys → the robot's hand model for those meshes
+
+
+def _hand(meshes):
+    key = tuple(sorted(meshes))
+    if key not in _HANDS:
+        _HANDS[key] = Hand(meshes, {k: _symmetries(k) for k in meshes})
+    return _HANDS[key]
 
 
 def _room(world, j, G):
     """Whether some grasp of part j at pose G has room among the parts of `world`."""
-    return any(not _grip_blockers(world, j, G, g) for g in GRASPS.get(world.mesh[j], []))
+    return world.hand.can_pick(_records({**world.poses, j: G}, world.mesh), j).ok
 
 
 def _takes_grasp(world, after, i, T, movers):
@@ -452,7 +359,7 @@ def _takes_slot(world, i, T, target, pending, final, below):
         _, _, lo_j, hi_j = _geometry(world.mesh[j], target[j])
         if np.any(lo_j > hi) or np.any(hi_j < lo):
             continue
-        base = _World({**final, j: target[j]}, world.mesh)
+        base = _World({**final, j: target[j]}, world.mesh, world.hand)
         if _room(base, j, target[j]) and not _room(base.moved(i, T), j, target[j]):
             out.append(j)
     return out
@@ -460,17 +367,12 @@ def _takes_slot(world, i, T, target, pending, final, below):
 
 def _move_blockers(world, i, T_to, after):
     """None when part i can be carried from where it is in `world` to `T_to` (leaving
-    `after`) by one grasp that has room at both ends; else the parts in the way, most often
-    first."""
-    count = {}
-    for grasp in GRASPS.get(world.mesh[i], []):
-        hit = _grip_blockers(world, i, world.poses[i], grasp)
-        hit = hit or _grip_blockers(after, i, T_to, grasp)
-        if not hit:
-            return None
-        for j in hit:
-            count[j] = count.get(j, 0) + 1
-    return sorted(count, key=lambda j: (-count[j], j))
+    `after`) by one grasp that has room at both ends; else the parts in the way, most
+    blocking first ([] when no grasp could be had whatever moved)."""
+    verdict = world.hand.can_move(
+        _records(world.poses, world.mesh), i, T_to, place_records=_records(after.poses, world.mesh)
+    )
+    return None if verdict.ok else [j for j in verdict.blockers if j in world.poses]
 
 
 def _hangs_over(world, i, T=None):
@@ -595,7 +497,7 @@ def _temporary(world, i, pending, keep=(), poor_place=None):
     return None
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start_recs = {str(r["id"]): r for r in start_state["objects"]}
     goal_recs = {str(r["id"]): r for r in goal_state["objects"]}
     if sorted(start_recs) != sorted(goal_recs):
@@ -623,19 +525,20 @@ def plan(start_state, goal_state):
                 "gripper picks from above and turns parts only about the vertical, so no "
                 "sequence of transfers can tip it over (it needs a re-grasp from the side)",
             }
-    goal_world = _World(target, mesh)
+    hand = _hand(meshes)
+    goal_world = _World(target, mesh, hand)
     goal_sup = {i: set(s) for i, s in goal_world.sup.items()}
-    result = _build(start, goal, target, goal_sup, mesh, grip=True)
+    result = _build(start, goal, target, goal_sup, mesh, hand, grip=True)
     if result["status"] != "ok":  # no order leaves the fingers room: the geometric order
-        result = _build(start, goal, target, goal_sup, mesh, grip=False)
+        result = _build(start, goal, target, goal_sup, mesh, hand, grip=False)
     return result
 
 
-def _build(start, goal, target, goal_sup, mesh, grip):
+def _build(start, goal, target, goal_sup, mesh, hand, grip):
     """Greedy construction (see the module docstring); `grip`: every move must leave the
     gripper room at both ends."""
-    world = _World(start, mesh)
-    goal_world = _World(target, mesh)
+    world = _World(start, mesh, hand)
+    goal_world = _World(target, mesh, hand)
     below = {}  # part → the parts it rests on in the goal, directly or not
     for j in sorted(goal):
         stack, seen = [j], set()
@@ -681,11 +584,12 @@ def _build(start, goal, target, goal_sup, mesh, grip):
             """Part i put down at T could not be taken from there to its goal by one grasp
             with room at both ends (seen against the finished goal)."""
             here = world.moved(i, T)
-            return not any(
-                not _grip_blockers(here, i, T, g)
-                and not _grip_blockers(goal_world, i, target[i], g)
-                for g in GRASPS.get(mesh[i], [])
-            )
+            return not hand.can_move(
+                _records(here.poses, mesh),
+                i,
+                target[i],
+                place_records=_records(goal_world.poses, mesh),
+            ).ok
 
         def poor_place(i, T):
             return slot_taken(i, T) or stuck_there(i, T)
@@ -705,10 +609,11 @@ def _build(start, goal, target, goal_sup, mesh, grip):
                 # no room for the fingers, something over the place (it comes down
                 # vertically), or it would take away another's grasp: those must go first,
                 # well away from i
+                moving = _move_blockers(world, i, T, after)
+                if moving == []:
+                    continue  # no grasp whatever moved: nothing to clear for it
                 blockers = (
-                    _move_blockers(world, i, T, after)
-                    or _hangs_over(world, i, T)
-                    or _takes_grasp(world, after, i, T, pending)
+                    moving or _hangs_over(world, i, T) or _takes_grasp(world, after, i, T, pending)
                 )
                 if blockers:
                     for j in blockers:

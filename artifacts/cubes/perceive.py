@@ -18,6 +18,8 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from toolbox.vision import level_camera_on_table
+
 HUES = {  # catalogue colour → hue [deg] as rendered
     "red": 0.0,
     "green": 127.0,
@@ -322,6 +324,7 @@ def _repair(fits, placed, half, missing):
 def perceive(observation, meshes, camera):
     rgb = np.asarray(observation["rgb"], dtype=np.uint8)
     depth = np.asarray(observation["depth"], dtype=np.float32)
+    camera = level_camera_on_table(depth, camera)  # the table shows the calibration's tilt
     key = "cube" if "cube" in meshes else sorted(meshes)[0]
     half = float(np.max(np.abs(np.asarray(meshes[key].vertices))))
     eye = np.asarray(camera["T_world_camera"], dtype=float)[:3, 3]

@@ -1,6 +1,6 @@
 # Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
 # the cubes domain, the level a model's program should reach. It uses only numpy.
-"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal.
+"""plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal.
 
 Greedy construction: every round, place a cube whose goal supporters are already final, whose
 goal column is free and which nothing rests on, lowest goal first; when none can be placed,
@@ -12,42 +12,42 @@ vertical is kept from the goal (cube rows and pyramids need it to fit). A goal t
 reach (floating or interpenetrating cubes, unknown ids) gives an explicit "infeasible".
 
 The robot is a parallel-jaw gripper (Robotiq 2F-85) coming down from above, so a move is only
-made when some grasp — jaws closing across one pair of the cube's side faces, the wrist on
-either side — has room among the other cubes at the pick and at the place (fingers, couplers,
-gripper base and wrist as boxes), and when it does not take away the last grasp of a cube that
-still has to move. A cube in the fingers' way goes to a temporary place first. When no order
-satisfies that, the plan falls back to the geometric order alone.
+made when the robot's own hand model (`toolbox.robot.Hand`, the model its executor and the
+plan checks use) finds a grasp with room among the other cubes at the pick and at the place,
+and when it does not take away the last grasp of a cube that still has to move. A cube in the
+fingers' way goes to a temporary place first. When no order satisfies that, the plan falls
+back to the geometric order alone. Goals must lie inside the robot's workspace
+(`toolbox.robot.WORKSPACE`); temporary places keep well inside it.
 """
 
 import numpy as np
 
-from toolbox.packing import polygon_gap
+from toolbox import cube_symmetries
+from toolbox.robot import WORKSPACE, Hand, Workspace
 
 SIDE = 0.04  # cube edge [m]
 HALF = SIDE / 2
 ON_GAP = 0.008  # vertical gap still read as resting on [m]
 SAME = 0.004  # a cube this close to its goal position counts as placed [m]
 SAME_YAW = np.radians(4.0)  # … and this close in yaw, modulo 90°
-# where objects may be at all: the robot's workspace [m]
-WORKSPACE_X = (0.25, 0.75)
-WORKSPACE_Y = (-0.35, 0.35)
-WORKSPACE_REACH = 0.78
-# where temporary places may go (the robot's comfortable reach in front of it) [m]
-REGION_X = (0.33, 0.67)
-REGION_Y = (-0.26, 0.26)
-REACH = 0.71
+# goals may lie anywhere in the workspace (with 5 mm of slack for perception); temporary
+# places keep this far inside it, where the arm is comfortable [m]
+SLACK = 0.005
+INSIDE = 0.08
+GOALS = Workspace(
+    x=(WORKSPACE.x[0] - SLACK, WORKSPACE.x[1] + SLACK),
+    y=(WORKSPACE.y[0] - SLACK, WORKSPACE.y[1] + SLACK),
+    reach=WORKSPACE.reach + SLACK,
+)
+REGION = Workspace(
+    x=(WORKSPACE.x[0] + INSIDE, WORKSPACE.x[1] - INSIDE),
+    y=(WORKSPACE.y[0] + INSIDE, WORKSPACE.y[1] - INSIDE),
+    reach=WORKSPACE.reach - INSIDE,
+)
 GRID = 0.01  # spacing of candidate temporary places [m]
 CLEARANCE = 0.03  # free gap around a temporary place, for the gripper's fingers [m]
 GOAL_CLEARANCE = 0.012  # gap between a temporary place and goals still to build [m]
-# the gripper: the jaws open this much beyond the cube on each side; the fingertips come 3 mm
-# above whatever the cube stands on; boxes (beyond the pad face [m], half width along the
-# face [m], height above the fingertips [m]) of the fingers, couplers and base, and the
-# wrist (FR3 link 7) leaning to one side of the hand, all kept GRIP_MARGIN from the neighbours
-OPENING = 0.006
-TIP_HEIGHT = 0.003
-GRIP_MARGIN = 0.002
-FINGER_BOXES = ((0.0, 0.017, 0.012, 0.0, 0.04), (0.0, 0.033, 0.017, 0.04, 0.06))
-COUPLER_REACH = 0.064  # the couplers reach this far from the hand's centre line [m]
+NEAR = 0.2  # cubes farther apart than this never meet the gripper at the other [m]
 
 
 def _yaw(R):
@@ -108,23 +108,13 @@ def _yaw_close(a, b):
     return abs(d) <= SAME_YAW
 
 
-def _in_region(xy):
-    x, y = xy
-    return (
-        REGION_X[0] <= x <= REGION_X[1]
-        and REGION_Y[0] <= y <= REGION_Y[1]
-        and np.hypot(x, y) <= REACH
-    )
+def _in_region(points):
+    return REGION.contains(np.atleast_2d(points))
 
 
-def _reachable(xy):
-    """Inside the robot's workspace (where goals may be; 5 mm of slack for perception)."""
-    x, y = xy
-    return (
-        WORKSPACE_X[0] - 0.005 <= x <= WORKSPACE_X[1] + 0.005
-        and WORKSPACE_Y[0] - 0.005 <= y <= WORKSPACE_Y[1] + 0.005
-        and np.hypot(x, y) <= WORKSPACE_REACH + 0.005
-    )
+def _reachable(points):
+    """Inside the robot's workspace (where goals may be)."""
+    return GOALS.contains(np.atleast_2d(points))
 
 
 def _snap_goal(goal):
@@ -167,100 +157,53 @@ def _top_of(j, current):
         j = above[0]
 
 
-def _rect(centre, a, b, a_range, b_range):
-    """Corners (4, 2) of the box a_range × b_range of the hand's frame (a, b unit (2,))."""
-    (a0, a1), (b0, b1) = a_range, b_range
-    return np.array([centre + u * a + v * b for u, v in ((a0, b0), (a1, b0), (a1, b1), (a0, b1))])
+class _Hand:
+    """The robot's hand model on states {id: (x, y, z, yaw)}."""
 
+    def __init__(self, meshes, mesh_of):
+        self.hand = Hand(meshes, {k: cube_symmetries() for k in meshes})
+        self.mesh_of = mesh_of
 
-def _hand_boxes(p, axis, flip):
-    """The gripper holding cube p = (x, y, z, yaw) across its faces along body `axis` (0: x,
-    1: y), wrist on side `flip`: [(corners (4, 2), z_lo, z_hi)] in the world [m]."""
-    yaw = p[3] + axis * np.pi / 2
-    a = np.array([np.cos(yaw), np.sin(yaw)])
-    b = np.array([-a[1], a[0]])
-    g = HALF + OPENING
-    tip = p[2] - HALF + TIP_HEIGHT
-    m = GRIP_MARGIN
-    boxes = []
-    for side in (1.0, -1.0):
-        coupler = (0.0, max(0.0315, COUPLER_REACH - g), 0.02, 0.06, 0.12)
-        for d0, d1, w, z0, z1 in (*FINGER_BOXES, coupler):
-            a_range = sorted((side * (g + d0 - m), side * (g + d1 + m)))
-            boxes.append((_rect(p[:2], a, b, a_range, (-w - m, w + m)), tip + z0 - m, tip + z1))
-    boxes.append(
-        (
-            _rect(p[:2], a, b, (-0.038 - m, 0.038 + m), (-0.038 - m, 0.038 + m)),
-            tip + 0.12,
-            tip + 0.16,
+    def records(self, cubes):
+        return [{"id": j, "mesh": self.mesh_of[j], "pose": _pose(*q)} for j, q in cubes.items()]
+
+    def room(self, i, p, cubes):
+        """Whether some grasp of cube i at p has room among `cubes`."""
+        return self.hand.can_pick(self.records({**cubes, i: p}), i).ok
+
+    def blockers(self, i, p, current):
+        """[] when cube i can be carried from where it is to p (the others staying as in
+        `current`) with room for the gripper at both ends; else the cubes in the way, most
+        blocking first."""
+        after = {**current, i: p}
+        verdict = self.hand.can_move(
+            self.records(current), i, _pose(*p), place_records=self.records(after)
         )
-    )
-    wrist_a = sorted((flip * (-0.042 - m), flip * (0.082 + m)))
-    wrist_b = sorted((flip * (-0.082 - m), flip * (0.042 + m)))
-    boxes.append((_rect(p[:2], a, b, wrist_a, wrist_b), tip + 0.16, tip + 0.6))
-    return boxes
+        return [] if verdict.ok else [j for j in verdict.blockers if j in current] or [i]
 
 
-def _in_the_hand(i, p, cubes):
-    """Per grasp of cube i at p, lazily: the cubes of `cubes` ({id: pose}) the gripper would
-    touch."""
-    for axis in (0, 1):
-        for flip in (1.0, -1.0):
-            boxes = _hand_boxes(p, axis, flip)
-            hit = []
-            for j, q in sorted(cubes.items()):
-                if j == i or np.hypot(*(q[:2] - p[:2])) > 0.2:
-                    continue
-                corners = _corners(q)
-                for rect, z0, z1 in boxes:
-                    if q[2] + HALF > z0 and q[2] - HALF < z1 and polygon_gap(rect, corners)[0] < 0:
-                        hit.append(j)
-                        break
-            yield hit
-
-
-def _room(i, p, cubes):
-    """Whether some grasp of cube i at p has room among `cubes`."""
-    return any(not hit for hit in _in_the_hand(i, p, cubes))
-
-
-def _move_blockers(i, p, current):
-    """[] when cube i can be carried from where it is to p (the others staying as in
-    `current`) with room for the gripper at both ends; else the cubes in the way, most often
-    hit first (the cube's symmetry lets any grasp at the pick meet any grasp at the place)."""
-    after = dict(current)
-    after[i] = p
-    count = {}
-    for cubes, q in ((current, current[i]), (after, p)):
-        hits = list(_in_the_hand(i, q, cubes))
-        if any(not h for h in hits):
-            continue
-        for h in hits:
-            for j in h:
-                count[j] = count.get(j, 0) + 1
-    return sorted(count, key=lambda j: (-count[j], j))
-
-
-def _takes_grasp(i, p, current, pickable):
+def _takes_grasp(hand, i, p, current, pickable):
     """Cubes of `pickable` (each can be picked in `current`) that cannot once cube i is at p."""
-    after = dict(current)
-    after[i] = p
+    after = {**current, i: p}
     return [
         j
         for j in pickable
-        if j != i and np.hypot(*(current[j][:2] - p[:2])) < 0.2 and not _room(j, current[j], after)
+        if j != i
+        and np.hypot(*(current[j][:2] - p[:2])) < NEAR
+        and not hand.room(j, current[j], after)
     ]
 
 
-def _temporary(i, current, pending, grip=False, pickable=()):
-    """A free place on the table for cube i, as near as possible to where it is; with `grip`,
-    one the gripper can put it down at, taking no grasp from the cubes of `pickable`."""
+def _temporary(i, current, pending, hand=None, pickable=()):
+    """A free place on the table for cube i, as near as possible to where it is; with a
+    `hand`, one the gripper can put it down at, taking no grasp from the cubes of `pickable`."""
     here = current[i]
-    if grip and not _room(i, here, current):
+    grip = hand is not None
+    if grip and not hand.room(i, here, current):
         return None  # it cannot be picked where it stands
     others = [q for j, q in current.items() if j != i]
-    xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
-    ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
+    xs = np.arange(REGION.x[0], REGION.x[1] + 1e-9, GRID)
+    ys = np.arange(REGION.y[0], REGION.y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - here[:2], axis=1), kind="stable")
     levels = ((CLEARANCE, GOAL_CLEARANCE), (0.015, 0.005), (0.008, 0.0))
@@ -271,21 +214,21 @@ def _temporary(i, current, pending, grip=False, pickable=()):
             p = np.array([cand[k][0], cand[k][1], HALF, here[3]])
             if np.hypot(*(p[:2] - here[:2])) < 0.02:
                 continue  # a place, not where it stands
-            if not _in_region(p[:2]) or not all(_in_region(c) for c in _corners(p)):
+            if not _in_region(_corners(p)):
                 continue
             if any(_footprint_gap(p, q) < clearance for q in others):
                 continue
             if any(_footprint_gap(p, g) < goal_clearance for g in pending):
                 continue
             if grip and (
-                not _room(i, p, {**current, i: p}) or _takes_grasp(i, p, current, pickable)
+                hand.blockers(i, p, current) or _takes_grasp(hand, i, p, current, pickable)
             ):
                 continue
             return p
     return None
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
     start = {str(r["id"]): _as_xyzy(r["pose"]) for r in start_state["objects"]}
     goal_raw = {str(r["id"]): r["pose"] for r in goal_state["objects"]}
     if sorted(start) != sorted(goal_raw):
@@ -300,17 +243,19 @@ def plan(start_state, goal_state):
     if goal is None:
         return {"status": "infeasible", "reason": why}
     for i, p in goal.items():
-        if not all(_reachable(c) for c in _corners(p)):
+        if not _reachable(_corners(p)):
             return {"status": "infeasible", "reason": f"'{i}' is out of reach in the goal"}
-    result = _build(start, goal, grip=True)
+    mesh_of = {str(r["id"]): r["mesh"] for r in start_state["objects"]}
+    result = _build(start, goal, _Hand(meshes, mesh_of))
     if result["status"] != "ok":  # no order leaves the gripper room: the geometric order
-        result = _build(start, goal, grip=False)
+        result = _build(start, goal, None)
     return result
 
 
-def _build(start, goal, grip):
-    """Greedy construction (see the module docstring); `grip`: every move must leave the
-    gripper room at both ends and no cube still to move without a grasp."""
+def _build(start, goal, hand):
+    """Greedy construction (see the module docstring); with a `hand`, every move must leave
+    the gripper room at both ends and no cube still to move without a grasp."""
+    grip = hand is not None
     goal_sup = _supporters(goal)
     current = dict(start)
     steps = []
@@ -338,13 +283,13 @@ def _build(start, goal, grip):
             key=lambda i: (goal[i][2], i),
         )
         movers = [j for j in goal if not is_done(j)] if grip else []
-        pickable = [j for j in movers if _room(j, current[j], current)]
+        pickable = [j for j in movers if hand.room(j, current[j], current)]
         move, in_the_way = None, []
         for i in ready:
             if i not in loaded and _column_free(i, goal[i], current):
                 if grip:
-                    blockers = _move_blockers(i, goal[i], current)
-                    blockers = blockers or _takes_grasp(i, goal[i], current, pickable)
+                    blockers = hand.blockers(i, goal[i], current)
+                    blockers = blockers or _takes_grasp(hand, i, goal[i], current, pickable)
                     if blockers:  # no room for the gripper, or it would take a grasp away
                         in_the_way += [j for j in blockers if j not in in_the_way]
                         continue
@@ -374,7 +319,7 @@ def _build(start, goal, grip):
             if blocker is None:
                 return {"status": "infeasible", "reason": "no cube can be moved"}
             pending = [goal[i] for i in goal if not is_done(i) and i != blocker]
-            place = _temporary(blocker, current, pending, grip, pickable)
+            place = _temporary(blocker, current, pending, hand, pickable)
             if place is None and grip:
                 return {"status": "infeasible", "reason": f"no room to put '{blocker}' down"}
             if place is None:

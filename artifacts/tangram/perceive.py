@@ -33,6 +33,8 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from toolbox.vision import level_camera_on_table
+
 OBJECTS = {  # id → mesh key, in catalogue order
     "large_1": "large_triangle",
     "large_2": "large_triangle",
@@ -336,6 +338,7 @@ class _Sparse:
 def perceive(observation, meshes, camera):
     rgb = np.asarray(observation["rgb"], dtype=np.uint8)
     depth = np.asarray(observation["depth"], dtype=np.float32).astype(float)
+    camera = level_camera_on_table(depth, camera)  # the table shows the calibration's tilt
     view = _View(camera, depth)
     labels = _labels(rgb)
     kernel = np.ones((3, 3), np.uint8)

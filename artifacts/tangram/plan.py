@@ -1,7 +1,7 @@
 # Written by people (the RIVET team), not by a model: the hand-written reference `plan` for
 # the tangram domain, the level a model's program should reach. It uses numpy and
 # toolbox.packing.
-"""plan(start_state, goal_state) -> plan: pick-and-place steps that rebuild the goal figure.
+"""plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal figure.
 
 Pieces lie flat and turn only about the vertical, so a pose is (x, y, yaw) and a piece is its
 outline (known per mesh key, with the catalogue's 0.25 mm clearance per edge) plus the 16 mm
@@ -44,24 +44,18 @@ knob's two axes.
 import numpy as np
 
 from toolbox.packing import finger_footprints, polygon_gap, spread_footprints
+from toolbox.robot import JAW_CLEARANCES, WORKSPACE
 
-OUTLINES = {  # bottom outline in the piece's frame [mm], counter-clockwise
-    "large_triangle": [(-79.396, -26.417), (79.396, -26.417), (0.0, 52.98)],
-    "medium_triangle": [(-55.965, -18.606), (55.965, -18.606), (0.0, 37.359)],
-    "small_triangle": [(-39.396, -13.083), (39.396, -13.083), (0.0, 26.313)],
-    "square": [(-28.034, -28.034), (28.034, -28.034), (28.034, 28.034), (-28.034, 28.034)],
-    "parallelogram": [(-59.396, -19.75), (19.896, -19.75), (59.396, 19.75), (-19.896, 19.75)],
-}
-OUTLINES = {k: np.array(v) / 1000.0 for k, v in OUTLINES.items()}
-SYMMETRY = {  # rotational symmetry order about the vertical
+SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "large_triangle": 1,
     "medium_triangle": 1,
     "small_triangle": 1,
     "square": 4,
     "parallelogram": 2,
 }
-KNOB_HALF = 0.008  # [m]
-OPENING = 0.024  # jaw opening around the knob [m]
+KNOB_HALF = 0.008  # the 16 mm square knob (the task text) [m]
+# the jaws around a knob with neighbours close by: the smaller approach clearance per side
+OPENING = 2 * KNOB_HALF + 2 * JAW_CLEARANCES[-1]
 FINGER_MARGIN = 0.002  # [m]
 UPRIGHT = np.cos(np.radians(5.0))  # |z axis · world z| of a piece lying flat
 ON_TABLE = 0.005  # a goal piece's origin this far from z = 0 is not on the table [m]
@@ -76,12 +70,32 @@ EASY_TURN = np.radians(70.0)  # a turn the wrist manages with either of two gras
 REGRASP_TURN = np.radians(100.0)  # longer turns held one way only are split in two
 TEMPORARY = ((0.025, 0.012), (0.015, 0.006), (0.008, 0.002))  # (to pieces, to goals) [m]
 GRID = 0.01  # spacing of candidate temporary places [m]
-REGION_X = (0.32, 0.68)  # where temporary places may go [m]
-REGION_Y = (-0.27, 0.27)
-REACH = 0.72
-WORKSPACE_X = (0.25, 0.75)  # where any piece may be [m]
-WORKSPACE_Y = (-0.35, 0.35)
-WORKSPACE_REACH = 0.78
+INSIDE = 0.07  # temporary places keep this far inside the robot's workspace [m]
+REGION_X = (WORKSPACE.x[0] + INSIDE, WORKSPACE.x[1] - INSIDE)
+REGION_Y = (WORKSPACE.y[0] + INSIDE, WORKSPACE.y[1] - INSIDE)
+REACH = WORKSPACE.reach - INSIDE
+OUTLINES = {}  # mesh key → bottom outline (k, 2) in the piece's frame [m], counter-clockwise
+
+
+def _outline(mesh):
+    """The bottom outline of a piece's mesh: the convex hull of its vertices at z = 0."""
+    v = np.asarray(mesh.vertices, dtype=float)
+    pts = np.unique(np.round(v[v[:, 2] < v[:, 2].min() + 1e-5, :2], 9), axis=0)
+    pts = sorted(map(tuple, pts))
+
+    def half(points):
+        out = []
+        for p in points:
+            while (
+                len(out) >= 2
+                and np.cross(np.subtract(out[-1], out[-2]), np.subtract(p, out[-2])) <= 1e-12
+            ):
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])
 
 
 class _Piece:
@@ -236,7 +250,10 @@ def _targets(goal, current, done):
     return out
 
 
-def plan(start_state, goal_state):
+def plan(start_state, goal_state, meshes):
+    for key, mesh in meshes.items():
+        if key in SYMMETRY and key not in OUTLINES:
+            OUTLINES[key] = _outline(mesh)
     start_recs = {str(r["id"]): r for r in start_state["objects"]}
     goal_recs = {str(r["id"]): r for r in goal_state["objects"]}
     if sorted(start_recs) != sorted(goal_recs):
@@ -265,7 +282,7 @@ def plan(start_state, goal_state):
     for k, i in enumerate(ids):
         if start_recs[i]["mesh"] != goal_recs[i]["mesh"]:
             return {"status": "infeasible", "reason": f"'{i}' has different meshes"}
-        if not _inside(goal[i].outline, WORKSPACE_X, WORKSPACE_Y, WORKSPACE_REACH):
+        if not _inside(goal[i].outline, WORKSPACE.x, WORKSPACE.y, WORKSPACE.reach):
             return {"status": "infeasible", "reason": f"'{i}' is out of reach in the goal"}
         for j in ids[k + 1 :]:
             if _gap(goal[i], goal[j]) < -CROWDED:
