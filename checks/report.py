@@ -19,6 +19,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import PurePath
 from typing import Any, Literal
 
 import numpy as np
@@ -307,7 +308,10 @@ def report_markdown(report: Mapping[str, Any], *, max_failures: int = 3) -> str:
     for img in first.get("images", []):
         lines += [
             "",
-            f"Image: `{img['path']}`" + (f": {img['caption']}" if img.get("caption") else ""),
+            # the file's name alone: the run's folder is not the model's business and would
+            # make the prompt differ from run to run (replays match prompts by their hash)
+            f"Image: `{PurePath(str(img['path'])).name}`"
+            + (f": {img['caption']}" if img.get("caption") else ""),
         ]
     rest = failing[1:max_failures]
     if rest:
