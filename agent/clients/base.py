@@ -10,6 +10,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import json
+import re
 from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
@@ -38,6 +39,23 @@ class ImageBlock:
 Block = TextBlock | ImageBlock
 
 
+# Figures a check measured (CPU seconds per call) differ between two runs of the same draft;
+# the request hash leaves them out, so a replayed transcript still matches its prompts. The
+# model reads them as they were measured.
+_MEASURED = re.compile(
+    r"\d+(?:\.\d+)?(?= s of CPU)"
+    r"|(?<=slowest )\d+(?:\.\d+)? s on [^),;]*"  # the slowest call, and which case it was
+    r"|(?<=median )\d+(?:\.\d+)?(?= s)"
+    r"|(?<=max_s = )\d+(?:\.\d+)?"
+    r"|(?<=median_s = )\d+(?:\.\d+)?"
+)
+
+
+def steady_text(text: str) -> str:
+    """`text` with the measured timings masked (what `ModelRequest.hash` hashes)."""
+    return _MEASURED.sub("#", text)
+
+
 @dataclass(frozen=True, kw_only=True)
 class ModelRequest:
     """One call: what the model reads, and which function/attempt it is for."""
@@ -50,11 +68,12 @@ class ModelRequest:
 
     @property
     def hash(self) -> str:
-        """sha256 of the prompt (text and image bytes); independent of the client."""
+        """sha256 of the prompt (text and image bytes, measured timings masked: `steady_text`);
+        independent of the client."""
 
         def enc(b: Block) -> dict:
             if isinstance(b, TextBlock):
-                return {"text": b.text}
+                return {"text": steady_text(b.text)}
             return {"image": b.sha256}
 
         payload = {
