@@ -365,7 +365,10 @@ def test_a_perceive_session_can_reach_no_ground_truth(docker):
             dumps.append(got.value)
     first = dumps[0]["stats"]
     print("search:", first)  # third-party files skipped for time are `truncated`
-    assert first["files"] > 10_000 and first["memory_bytes"] > 50 << 20, first
+    # the places a run can write and the project's own are searched in full; the read-only
+    # third-party trees for as long as the search's time lasts (on a loaded machine fewer)
+    assert first["files"] > 10_000 or first["truncated"] > 0, first
+    assert first["memory_bytes"] > 50 << 20, first
     assert first["blob_truncated"] == 0 and first["writable_files"] > 0, first
     assert any(name.startswith("/in/") for name, _, _ in dumps[0]["index"]), "/in was searched"
     assert any(name == "environment" for name, _, _ in dumps[0]["index"])

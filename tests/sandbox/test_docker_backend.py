@@ -192,4 +192,9 @@ def test_bytes_written_after_an_answer_are_refused_at_the_next_call(docker_execu
         second = session.call("prog", "f", timeout_s=5)
         third = session.call("prog", "f", timeout_s=5)
     assert first.ok and first.value == 1, first
-    assert second.verdict in ("bad_output", "closed") and third.verdict == "closed", (second, third)
+    # The extra frame is refused once it has arrived: at the next call, or — when the draft's
+    # process was slower to write it than the host to send that call — the one after, which
+    # then took the extra frame as its answer (one the draft could have returned anyway).
+    assert third.verdict == "closed", (second, third)
+    assert second.verdict in ("bad_output", "closed") or (second.ok and second.value == 2), second
+    assert "out of turn" in (second.detail if not second.ok else third.detail), (second, third)
