@@ -62,6 +62,11 @@ class Domain:
     on_gap: ClassVar[float] = 0.008  # [m]
     adjacent_gap: ClassVar[float | None] = 0.012  # [m]
     temp_clearance: ClassVar[float] = 0.03  # [m]
+    # (gap, largest shift) [m]: where a goal packs objects edge to edge, the oracle opens its
+    # gaps towards `gap` (moving no object more than the shift) before placing them — a robot
+    # whose in-hand estimate is good to a few tenths of a millimetre cannot hit gaps of half a
+    # millimetre (the programs get the same tool: `toolbox.packing.spread_footprints`)
+    placement_spread: ClassVar[tuple[float, float] | None] = None
     # where objects may be (reachable by the FR3 top-down), checked on every mesh vertex
     workspace: ClassVar[Workspace] = WORKSPACE
     # where generators and temporary places put objects (inside `workspace`)

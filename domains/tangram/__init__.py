@@ -52,6 +52,7 @@ class Tangram(Domain):
     on_gap = 0.005
     adjacent_gap = 0.008
     temp_clearance = 0.03
+    placement_spread = (0.0015, 0.0015)
     properties = {  # noqa: RUF012
         "perceive": [
             ("never_mirrored", {"meshes": ["parallelogram"]}),

@@ -24,7 +24,7 @@ class FixedPlan:
     def __init__(self, make):
         self.make = make
 
-    def solve_from_truth(self, instance):
+    def solve_from_truth(self, instance, domain=None):
         return PolicyOutput(plan=self.make(instance), start_state=None, goal_state=None)
 
 
@@ -180,3 +180,28 @@ def test_the_executor_grasps_where_perception_says(cubes, track):
         assert not r.final_ok
         assert r.execution_failure is not None and r.execution_failure["step"] == 0
         assert r.execution_failure["kind"] in {"grasp_failed", "dropped"}
+
+
+def test_the_oracle_opens_tangram_gaps_and_leaves_stacks_alone():
+    tangram = domains.load("tangram")
+    inst = tangram.benchmark()[0]
+    plain = OraclePolicy().solve_from_truth(inst).plan["steps"]
+    spread = OraclePolicy().solve_from_truth(inst, tangram).plan["steps"]
+    moved = [
+        np.asarray(b["target_pose"])[:3, 3] - np.asarray(a["target_pose"])[:3, 3]
+        for a, b in zip(plain, spread, strict=True)
+    ]
+    _, shift = tangram.placement_spread
+    assert max(np.linalg.norm(m) for m in moved) <= shift + 1e-6  # within the scoring tolerance
+    assert max(np.linalg.norm(m) for m in moved) > 1e-4  # the benchmark's pieces touch
+    assert all(abs(m[2]) < 1e-12 for m in moved)  # flat: only sideways
+    for a, b in zip(plain, spread, strict=True):  # no turn
+        assert np.allclose(
+            np.asarray(a["target_pose"])[:3, :3], np.asarray(b["target_pose"])[:3, :3]
+        )
+
+    cubes = domains.load("cubes")
+    inst = cubes.benchmark()[0]
+    same = OraclePolicy().solve_from_truth(inst, cubes).plan["steps"]
+    for a, b in zip(OraclePolicy().solve_from_truth(inst).plan["steps"], same, strict=True):
+        assert np.array_equal(np.asarray(a["target_pose"]), np.asarray(b["target_pose"]))
