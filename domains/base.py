@@ -44,7 +44,16 @@ from domains.errors import DomainError, UnknownObjectError
 from domains.generation import PhysicsCheck, draw_instance
 from domains.instance import Instance
 from domains.reference_order import ReferencePlanner
-from geometry import WORKSPACE, Geometry, MoveCheck, Piece, Workspace, bodies_of, contact_edges
+from geometry import (
+    PLACEMENT,
+    WORKSPACE,
+    Geometry,
+    MoveCheck,
+    Piece,
+    Workspace,
+    bodies_of,
+    contact_edges,
+)
 
 CAMERA_NAMES = ("front", "view1", "view2")
 
@@ -70,7 +79,7 @@ class Domain:
     # where objects may be (reachable by the FR3 top-down), checked on every mesh vertex
     workspace: ClassVar[Workspace] = WORKSPACE
     # where generators and temporary places put objects (inside `workspace`)
-    placement: ClassVar[Workspace] = Workspace(x=(0.32, 0.68), y=(-0.27, 0.27), reach=0.72)
+    placement: ClassVar[Workspace] = PLACEMENT
     max_height: ClassVar[float] = 0.35  # highest allowed point of any object [m]
     # the domain properties its drafts are checked for, by function (`checks.properties`)
     properties: ClassVar[dict[str, list[tuple[str, dict[str, Any]]]]] = {}

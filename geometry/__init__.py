@@ -36,6 +36,7 @@ from geometry.convex import (
     yaw_pose,
 )
 from geometry.hand import (
+    PLACEMENT,
     STROKE,
     WORKSPACE,
     FingerModel,
@@ -51,6 +52,7 @@ from geometry.shape import RestingPose, Shape, stable_poses
 from geometry.tolerances import TOLERANCES, Tolerances
 
 __all__ = [
+    "PLACEMENT",
     "STROKE",
     "TABLE",
     "TOLERANCES",

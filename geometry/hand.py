@@ -34,6 +34,10 @@ from geometry.tolerances import TOLERANCES
 WORKSPACE = Workspace(x=(0.25, 0.75), y=(-0.35, 0.35), reach=0.78)
 """Where the FR3 reaches top-down with the 2F-85: every point of an object it picks or places
 must lie inside (the plan checks refuse a step outside, and generators keep scenes inside)."""
+PLACEMENT = Workspace(x=(0.32, 0.68), y=(-0.27, 0.27), reach=0.72)
+"""Where the task's scenes keep their objects, inside `WORKSPACE`: the generators draw every
+object inside it, and it is where a plan puts objects aside with the arm comfortably within
+reach (near the workspace's edge the wrist runs out of joint range)."""
 MAX_GRASP_WIDTH = 0.080  # [m] the widest face pair the jaws take (they open to 85 mm)
 VERTICAL_TOL = TOLERANCES.face_vertical
 ANTIPARALLEL_TOL = TOLERANCES.face_antiparallel

@@ -16,6 +16,9 @@ turns it only about the vertical, lowers it straight down onto the target and op
   object's symmetry);
 - both ends inside `WORKSPACE`, every point of the object (the arm reaches them top-down).
 
+The task's scenes keep every object inside `PLACEMENT`, a region inside `WORKSPACE` where the
+arm is comfortably within reach: put objects aside there.
+
 `Hand(meshes, symmetries).can_move(...)` answers all of this but the arm's joint limits (the
 checks add an IK test). `MAX_OPENING` is the widest the jaws open; for the approach and the
 release they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or
@@ -30,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from geometry import STROKE, WORKSPACE, GraspReport, MoveVerdict, Shape, Workspace
+from geometry import PLACEMENT, STROKE, WORKSPACE, GraspReport, MoveVerdict, Shape, Workspace
 from geometry.hand import MAX_GRASP_WIDTH, FingerModel, Grasp, MoveCheck, Obstacle, plan_grasps
 from toolbox.errors import ToolboxError
 
@@ -38,6 +41,7 @@ __all__ = [
     "JAW_CLEARANCES",
     "MAX_GRASP_WIDTH",
     "MAX_OPENING",
+    "PLACEMENT",
     "WORKSPACE",
     "Grasp",
     "GraspReport",

@@ -44,7 +44,7 @@ knob's two axes.
 import numpy as np
 
 from toolbox.packing import finger_footprints, polygon_gap, spread_footprints
-from toolbox.robot import JAW_CLEARANCES, WORKSPACE
+from toolbox.robot import JAW_CLEARANCES, PLACEMENT, WORKSPACE
 
 SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "large_triangle": 1,
@@ -70,10 +70,7 @@ EASY_TURN = np.radians(70.0)  # a turn the wrist manages with either of two gras
 REGRASP_TURN = np.radians(100.0)  # longer turns held one way only are split in two
 TEMPORARY = ((0.025, 0.012), (0.015, 0.006), (0.008, 0.002))  # (to pieces, to goals) [m]
 GRID = 0.01  # spacing of candidate temporary places [m]
-INSIDE = 0.07  # temporary places keep this far inside the robot's workspace [m]
-REGION_X = (WORKSPACE.x[0] + INSIDE, WORKSPACE.x[1] - INSIDE)
-REGION_Y = (WORKSPACE.y[0] + INSIDE, WORKSPACE.y[1] - INSIDE)
-REACH = WORKSPACE.reach - INSIDE
+REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 OUTLINES = {}  # mesh key → bottom outline (k, 2) in the piece's frame [m], counter-clockwise
 
 

@@ -30,7 +30,7 @@ with everything resting only on it must keep its joint centre of mass over its s
    placement that would wall in a goal place still to fill waits, and a temporary place is one
    from which the part can be taken on to its goal. When no order satisfies the gripper, the
    geometric order stands. Goals must lie inside the robot's workspace
-   (`toolbox.robot.WORKSPACE`); temporary places keep well inside it.
+   (`toolbox.robot.WORKSPACE`); temporary places lie in `toolbox.robot.PLACEMENT`.
 """
 
 import itertools
@@ -39,7 +39,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
-from toolbox.robot import WORKSPACE, Hand
+from toolbox.robot import PLACEMENT, WORKSPACE, Hand
 
 DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
@@ -49,10 +49,7 @@ TILT = np.radians(20.0)  # a goal orientation farther than this from every resti
 GOAL_OVERLAP = 0.003  # goal parts may interpenetrate this much (perception noise) [m]
 TOUCH = 0.001  # a placement may touch others this deep [m]
 # temporary places keep this far inside the robot's workspace, where the arm is comfortable [m]
-INSIDE = 0.07
-REGION_X = (WORKSPACE.x[0] + INSIDE, WORKSPACE.x[1] - INSIDE)
-REGION_Y = (WORKSPACE.y[0] + INSIDE, WORKSPACE.y[1] - INSIDE)
-REACH = WORKSPACE.reach - INSIDE
+REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 GRID = 0.01  # spacing of candidate temporary places [m]
 CLEARANCES = ((0.03, 0.01), (0.015, 0.005), (0.008, 0.0))  # (to parts, to unbuilt goals) [m]
 
