@@ -142,3 +142,14 @@ def draw_instance(
             order=tuple(order),
         )
     raise GenerationError(f"{domain.name} {name}: no valid start; " + "; ".join(problems[-3:]))
+
+
+def retry(make: Callable[[], list[dict]], tries: int = 20) -> list[dict]:
+    """`make()` again (its random generator moves on) while it raises `GenerationError`
+    (e.g. finds no free place), at most `tries` times; the last error propagates."""
+    for _ in range(tries - 1):
+        try:
+            return make()
+        except GenerationError:
+            pass
+    return make()

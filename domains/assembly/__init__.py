@@ -11,7 +11,7 @@ pillar), from starts of stacked clutter close together, one stack on the goal's 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +21,7 @@ from domains._layout import Unit
 from domains.assembly.dimensions import ARCH_H, BEAM, BLOCK, CYL_H, L_FOOT, PILLAR
 from domains.base import Domain
 from domains.errors import GenerationError
+from domains.generation import retry
 from domains.registry import register
 from geometry import TOLERANCES, place, yaw_pose
 
@@ -167,7 +168,7 @@ class Assembly(Domain):
         self, rng: np.random.Generator, index: int | None, split: str = "dev"
     ) -> list[dict]:
         if split == "test":
-            return _retry(lambda: self._goal(rng, index, split))
+            return retry(lambda: self._goal(rng, index, split))
         return self._goal(rng, index, split)
 
     def _goal(self, rng: np.random.Generator, index: int | None, split: str) -> list[dict]:
@@ -201,7 +202,7 @@ class Assembly(Domain):
         self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
     ) -> list[dict]:
         if split == "test":
-            return _retry(lambda: self._test_start(rng, goal))
+            return retry(lambda: self._test_start(rng, goal))
         # every part starts upright, as the goal uses it; some start stacked on others
         free = [str(i) for i in rng.permutation(list(MESH))]
         units: list[Unit] = []
@@ -227,7 +228,7 @@ class Assembly(Domain):
     def _test_start(self, rng: np.random.Generator, goal: Sequence[Mapping]) -> list[dict]:
         """Stacked clutter: a stack of three and one or two pairs (every part upright, in the
         goal's resting pose), the first stack standing where a goal part stands on the
-        table, the units 15 mm apart (`_retry` draws again when they do not fit)."""
+        table, the units 15 mm apart (`retry` draws again when they do not fit)."""
         free = [str(i) for i in rng.permutation(list(MESH))]
         triple = TEST_STACKS[int(rng.integers(len(TEST_STACKS)))]
         units = [_stack(triple)]
@@ -367,16 +368,6 @@ STACKS = (
     ("lblock", "cylinder"),
     ("pillar_1", "block"),
 )
-
-
-def _retry(make: Callable[[], list[dict]], tries: int = 20) -> list[dict]:
-    """`make()` again (its random generator moves on) while it finds no free place."""
-    for _ in range(tries - 1):
-        try:
-            return make()
-        except GenerationError:
-            pass
-    return make()
 
 
 def _stack(ids: Sequence[str]) -> Unit:

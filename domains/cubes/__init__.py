@@ -9,7 +9,7 @@ starts every cube in tall stacks of clutter close together, one squatting on a g
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +17,7 @@ import numpy as np
 from domains import _layout
 from domains._layout import Unit, unit
 from domains.base import Domain
-from domains.errors import GenerationError
+from domains.generation import retry
 from domains.registry import register
 from geometry import bodies_of, place, yaw_pose
 from geometry import resting_on as supports
@@ -152,7 +152,7 @@ class Cubes(Domain):
         self, rng: np.random.Generator, index: int | None, split: str = "dev"
     ) -> list[dict]:
         if split == "test":
-            return _retry(lambda: self._test_goal(rng, index))
+            return retry(lambda: self._test_goal(rng, index))
         if index == 1:  # the authoring reference: a 3-2-1 pyramid facing the camera
             u = structure("pyramid", COLOURS)
             return _layout.records(u, yaw_pose(0.5, 0.0, 0.0, np.pi / 2))
@@ -189,7 +189,7 @@ class Cubes(Domain):
         self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
     ) -> list[dict]:
         if split == "test":
-            return _retry(lambda: self._test_start(rng, goal))
+            return retry(lambda: self._test_start(rng, goal))
         pose = {r["id"]: np.asarray(r["pose"]) for r in goal}
         sup = supports(bodies_of(goal, self.parts))
         free = [str(i) for i in rng.permutation(COLOURS)]
@@ -269,16 +269,6 @@ class Cubes(Domain):
             placed=placed,
             clearance=TEST_START_CLEARANCE,
         )
-
-
-def _retry(make: Callable[[], list[dict]], tries: int = 20) -> list[dict]:
-    """`make()` again (its random generator moves on) while it finds no free place."""
-    for _ in range(tries - 1):
-        try:
-            return make()
-        except GenerationError:
-            pass
-    return make()
 
 
 def _columns(sup: Mapping[str, set[str]]) -> list[list[str]]:

@@ -11,7 +11,7 @@ lie inside the figure's area.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
 
@@ -20,6 +20,7 @@ import numpy as np
 from domains import _layout
 from domains.base import Domain
 from domains.errors import GenerationError
+from domains.generation import retry
 from domains.registry import register
 from domains.tangram.figures import OBJECTS, UNIT
 from geometry import TOLERANCES, Body, Workspace, place, yaw_of, yaw_pose
@@ -148,7 +149,7 @@ class Tangram(Domain):
         self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
     ) -> list[dict]:
         if split == "test":
-            return _retry(lambda: self._test_start(rng, goal))
+            return retry(lambda: self._test_start(rng, goal))
         ids = [str(i) for i in rng.permutation(list(OBJECTS))]
         inside = int(rng.choice([0, 1, 2, 3], p=[0.3, 0.3, 0.25, 0.15]))
         xy = np.concatenate([place(r["id"], self.parts[r["mesh"]], r["pose"]).xy() for r in goal])
@@ -196,13 +197,3 @@ class Tangram(Domain):
             out += recs
             bodies += [place(r["id"], self.parts[r["mesh"]], r["pose"]) for r in recs]
         return out
-
-
-def _retry(make: Callable[[], list[dict]], tries: int = 20) -> list[dict]:
-    """`make()` again (its random generator moves on) while it finds no free place."""
-    for _ in range(tries - 1):
-        try:
-            return make()
-        except GenerationError:
-            pass
-    return make()
