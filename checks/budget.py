@@ -2,10 +2,19 @@
 
 Two kinds of time budget: a hard per-call limit (`call_timeout`, enforced by the sandbox from
 outside the draft's process: a call that overruns is killed) and the online budget
-(`ONLINE_BUDGET`, the median over the suite's calls that `interface.fast_enough` checks). The
-online pass of a policy — perceive twice, relate twice, plan once — should take under a second
-on one core, as the people-written programs do; the budgets below leave each function about
-twice what those programs need.
+(`ONLINE_BUDGET`, the median CPU time over the suite's calls that `interface.fast_enough`
+checks). The online pass of a policy — perceive twice, relate twice, plan once — should take
+under `ONLINE_PASS_S` on one core (a target: the cubes and tangram programs meet it, assembly's
+take about 1.7 s).
+
+The online budgets are a gate, so they leave each people-written program at least about twice
+the median CPU time it needs (assembly `perceive` 0.45-0.55 s and `plan` 0.43-0.65 s against
+1.0 s; measured 2026-12-03 on this project's 2-core runner): CPU time is not
+machine-independent — it moved ±30 % between minutes there — and a verdict this close to the
+line would flip from one machine, or one minute, to the next, changing the feedback and with
+it strict replay's request hashes. Scaling the budget by a calibration workload's time was
+tried and dropped: on that runner it read the machine as 0.56× the reference while the
+programs ran at their usual speed, and the scaled limit failed them.
 """
 
 from __future__ import annotations
@@ -16,9 +25,9 @@ from dataclasses import dataclass, field
 ONLINE_PASS_S = 1.0  # [s] what the whole online pass should take on one core (a target)
 ONLINE_BUDGET: dict[str, float] = {  # [s] median per call
     "render": 1.0,  # not in the online pass: it checks perceive (and people read its images)
-    "perceive": 0.6,
+    "perceive": 1.0,
     "relate": 0.2,
-    "plan": 0.6,
+    "plan": 1.0,
 }
 
 

@@ -37,6 +37,7 @@ from geometry.convex import (
 )
 from geometry.hand import (
     PLACEMENT,
+    PLACEMENT_SPREAD,
     STROKE,
     WORKSPACE,
     FingerModel,
@@ -53,6 +54,7 @@ from geometry.tolerances import TOLERANCES, Tolerances
 
 __all__ = [
     "PLACEMENT",
+    "PLACEMENT_SPREAD",
     "STROKE",
     "TABLE",
     "TOLERANCES",

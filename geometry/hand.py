@@ -38,6 +38,10 @@ PLACEMENT = Workspace(x=(0.32, 0.68), y=(-0.27, 0.27), reach=0.72)
 """Where the task's scenes keep their objects, inside `WORKSPACE`: the generators draw every
 object inside it, and it is where a plan puts objects aside with the arm comfortably within
 reach (near the workspace's edge the wrist runs out of joint range)."""
+PLACEMENT_SPREAD = (0.0015, 0.0015)
+"""(gap, max shift) [m]: a tightly packed goal is placed reliably once its gaps are opened to
+`gap`, moving no part more than `max shift` (the executor hits a target to a few tenths of a
+millimetre)."""
 MAX_GRASP_WIDTH = 0.080  # [m] the widest face pair the jaws take (they open to 85 mm)
 VERTICAL_TOL = TOLERANCES.face_vertical
 ANTIPARALLEL_TOL = TOLERANCES.face_antiparallel
@@ -282,20 +286,29 @@ def boxes_hit_triangles(
 ) -> bool:
     """True when the box (centre (3,), half extents (3,), axes R (3, 3) columns, world) overlaps
     any triangle of `tris` (n, 3, 3), world."""
+    n = len(tris)
+    return _pairs_overlap(np.broadcast_to(centre, (n, 3)), np.broadcast_to(half, (n, 3)), R, tris)
+
+
+def _pairs_overlap(
+    centres: np.ndarray, halves: np.ndarray, R: np.ndarray, tris: np.ndarray
+) -> bool:
+    """Whether any box k (centre centres[k], half extents halves[k], axes R) overlaps its
+    triangle tris[k] (separating axis theorem, all pairs at once)."""
     if len(tris) == 0:
         return False
-    v = (tris - centre) @ R  # (n, 3, 3) in the box frame
+    v = (tris - centres[:, None, :]) @ R  # (n, 3, 3) in the box frame
     # Box face axes.
     lo, hi = v.min(axis=1), v.max(axis=1)
-    keep = np.all((lo <= half) & (hi >= -half), axis=1)
+    keep = ((lo <= halves) & (hi >= -halves)).all(axis=1)
     if not keep.any():
         return False
-    v = v[keep]
+    v, half = v[keep], halves[keep]
     e = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)  # (n, 3, 3)
     # Triangle normal.
     n = _cross(e[:, 0], e[:, 1])
     p = np.einsum("nk,nk->n", n, v[:, 0])
-    r = np.abs(n) @ half
+    r = np.einsum("nk,nk->n", np.abs(n), half)
     sep = np.abs(p) > r
     # Nine edge × axis cross products, all at once: a[n, i, j] = e_i × (box axis j).
     ex, ey, ez = e[..., 0], e[..., 1], e[..., 2]  # (n, 3)
@@ -304,7 +317,7 @@ def boxes_hit_triangles(
     a[:, :, 1, 0], a[:, :, 1, 2] = -ez, ex
     a[:, :, 2, 0], a[:, :, 2, 1] = ey, -ex
     proj = np.einsum("nijk,nvk->nijv", a, v)  # (n, 3, 3, 3 vertices)
-    r = np.abs(a) @ half  # (n, 3, 3)
+    r = np.einsum("nijk,nk->nij", np.abs(a), half)  # (n, 3, 3)
     sep |= ((proj.min(axis=3) > r) | (proj.max(axis=3) < -r)).any(axis=(1, 2))
     return bool((~sep).any())
 
@@ -352,6 +365,32 @@ def _box_arrays(
     return np.array([c for c, _ in boxes]), np.array([h for _, h in boxes])
 
 
+def _gripper_boxes(
+    T_world_tcp: np.ndarray, gap: float, tip: float, margin: float, fingers: FingerModel
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The gripper's boxes in the world: centres, half extents, axes, and their world AABBs
+    (lo, hi)."""
+    R = T_world_tcp[:3, :3]
+    centres, halves = _box_arrays(fingers, gap, tip, margin)
+    c = centres @ R.T + T_world_tcp[:3, 3]  # (n, 3) world
+    extent = halves @ np.abs(R).T  # (n, 3) the boxes' world AABB half sizes
+    return c, halves, R, c - extent, c + extent
+
+
+def _boxes_hit(boxes: tuple[np.ndarray, ...], t: _Triangles) -> bool:
+    """Whether any of the gripper's `boxes` (`_gripper_boxes`) overlaps a triangle of `t`."""
+    c, halves, R, lo, hi = boxes
+    near = ((hi >= t.lo) & (lo <= t.hi)).all(axis=1)
+    if not near.any():
+        return False
+    idx = np.flatnonzero(near)
+    close = (  # (box, triangle) pairs whose world AABBs overlap
+        (t.tri_hi[None] >= lo[idx, None]) & (t.tri_lo[None] <= hi[idx, None])
+    ).all(axis=2)
+    b, k = np.nonzero(close)
+    return _pairs_overlap(c[idx[b]], halves[idx[b]], R, t.tris[k])
+
+
 def _gripper_hits(
     T_world_tcp: np.ndarray,
     gap: float,
@@ -360,18 +399,8 @@ def _gripper_hits(
     triangle_sets: Sequence[_Triangles],
     fingers: FingerModel,
 ) -> bool:
-    R = T_world_tcp[:3, :3]
-    centres, halves = _box_arrays(fingers, gap, tip, margin)
-    c = centres @ R.T + T_world_tcp[:3, 3]  # (n, 3) world
-    extent = halves @ np.abs(R).T  # (n, 3) the boxes' world AABB half sizes
-    for t in triangle_sets:
-        near = np.flatnonzero(np.all((c + extent >= t.lo) & (c - extent <= t.hi), axis=1))
-        for b in near:
-            lo, hi = c[b] - extent[b], c[b] + extent[b]
-            close = np.all((t.tri_hi >= lo) & (t.tri_lo <= hi), axis=1)
-            if close.any() and boxes_hit_triangles(c[b], halves[b], R, t.tris[close]):
-                return True
-    return False
+    boxes = _gripper_boxes(T_world_tcp, gap, tip, margin, fingers)
+    return any(_boxes_hit(boxes, t) for t in triangle_sets)
 
 
 # -- candidates -----------------------------------------------------------------------------
@@ -750,8 +779,9 @@ def _first_hit(
     triangle_sets: Sequence[_Triangles],
     fingers: FingerModel,
 ) -> int:
+    boxes = _gripper_boxes(T_world_tcp, gap, tip, margin, fingers)
     for i, tris in enumerate(triangle_sets):
-        if _gripper_hits(T_world_tcp, gap, tip, margin, [tris], fingers):
+        if _boxes_hit(boxes, tris):
             return i
     return -1
 

@@ -139,23 +139,24 @@ class OraclePolicy:
 def _spread_goal_places(domain: Domain, instance: Instance, steps: list[dict]) -> None:
     """Shift every step that puts an object at its goal pose by the spread of the goal's
     footprints (`toolbox.packing.spread_footprints`)."""
-    from scipy.spatial import ConvexHull
-
-    from toolbox.packing import spread_footprints
+    from toolbox.packing import footprint, spread_footprints
 
     assert domain.placement_spread is not None
     gap, shift = domain.placement_spread
     goal = {r["id"]: r for r in instance.goal["objects"]}
     ids = list(goal)
-    footprints = []
-    for oid in ids:
-        T = np.asarray(goal[oid]["pose"], dtype=float)
-        xy = se3.transform_points(T, domain.mesh(goal[oid]["mesh"]).vertices)[:, :2]
-        footprints.append(xy[ConvexHull(xy).vertices])
+    footprints = [footprint(domain.mesh(goal[oid]["mesh"]), goal[oid]["pose"]) for oid in ids]
     moves = dict(zip(ids, spread_footprints(footprints, gap=gap, max_shift=shift), strict=True))
-    for s in steps:
-        T_goal = np.asarray(goal[s["object"]]["pose"], dtype=float)
-        if np.allclose(s["target_pose"], T_goal, atol=1e-9):
+    for s in steps:  # a step to the goal pose or to one of its symmetric equivalents
+        record = goal[s["object"]]
+        at_goal = se3.within_tolerance(
+            s["target_pose"],
+            np.asarray(record["pose"], dtype=float),
+            trans_tol=1e-6,
+            rot_tol=1e-6,
+            symmetries=list(domain.symmetries(record["mesh"])),
+        )
+        if at_goal:
             s["target_pose"][:2, 3] += moves[s["object"]]
 
 

@@ -56,10 +56,13 @@ from toolbox.registration import (
 )
 from toolbox.render import compare_renders, overlay_mask, render_scene
 from toolbox.robot import (
+    FINGER_DEPTH,
+    FINGER_WIDTH,
     JAW_CLEARANCES,
     MAX_GRASP_WIDTH,
     MAX_OPENING,
     PLACEMENT,
+    PLACEMENT_SPREAD,
     WORKSPACE,
     Grasp,
     GraspReport,
@@ -103,10 +106,13 @@ from toolbox.vision import (
 )
 
 __all__ = [
+    "FINGER_DEPTH",
+    "FINGER_WIDTH",
     "JAW_CLEARANCES",
     "MAX_GRASP_WIDTH",
     "MAX_OPENING",
     "PLACEMENT",
+    "PLACEMENT_SPREAD",
     "WORKSPACE",
     "Grasp",
     "GraspReport",

@@ -15,6 +15,7 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, QhullError
 
 from toolbox.errors import ToolboxError
+from toolbox.robot import FINGER_DEPTH, FINGER_WIDTH
 
 __all__ = ["finger_footprints", "footprint", "polygon_gap", "spread_footprints"]
 
@@ -160,8 +161,8 @@ def finger_footprints(
     closing: object,
     opening: float,
     *,
-    finger_depth: float = 0.017,
-    finger_width: float = 0.024,
+    finger_depth: float = FINGER_DEPTH,
+    finger_width: float = FINGER_WIDTH,
     margin: float = 0.002,
 ) -> list[np.ndarray]:
     """Footprints (two (4, 2) rectangles [m]) of a parallel gripper's open fingers, from above.
@@ -171,7 +172,8 @@ def finger_footprints(
         closing: (2,) the direction the jaws close along (need not be unit).
         opening: distance between the pads' inner faces [m].
         finger_depth, finger_width: each finger's extent outwards from its pad face and
-            across the closing direction; the defaults are a Robotiq 2F-85's fingers.
+            across the closing direction; the defaults are the 2F-85's
+            (`toolbox.robot.FINGER_DEPTH`, `FINGER_WIDTH`).
         margin: clearance added on every side [m].
     Whatever overlaps a rectangle at the fingers' height (`polygon_gap(...) < 0`) is in the
     way of that grasp; try the other closing direction (a square knob has two).

@@ -17,13 +17,16 @@ turns it only about the vertical, lowers it straight down onto the target and op
 - both ends inside `WORKSPACE`, every point of the object (the arm reaches them top-down).
 
 The task's scenes keep every object inside `PLACEMENT`, a region inside `WORKSPACE` where the
-arm is comfortably within reach: put objects aside there.
+arm is comfortably within reach: put objects aside there. Where a domain packs parts tightly
+(its facts say so), `PLACEMENT_SPREAD` = (gap, max shift) is how far to open the goal's gaps
+and how far a part may move for that (`toolbox.spread_footprints`).
 
 `Hand(meshes, symmetries).can_move(...)` answers all of this but the arm's joint limits (the
 checks add an IK test). `MAX_OPENING` is the widest the jaws open; for the approach and the
 release they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or
 `JAW_CLEARANCES[1]` when a neighbour is too close for that (`toolbox.finger_footprints` draws
-the open fingers from above for such an opening). Records are ``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
+the open fingers from above for such an opening; each fingertip reaches `FINGER_DEPTH` outwards
+from its pad and is `FINGER_WIDTH` wide). Records are ``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
 """
 
 from __future__ import annotations
@@ -33,15 +36,27 @@ from typing import Any
 
 import numpy as np
 
-from geometry import PLACEMENT, STROKE, WORKSPACE, GraspReport, MoveVerdict, Shape, Workspace
+from geometry import (
+    PLACEMENT,
+    PLACEMENT_SPREAD,
+    STROKE,
+    WORKSPACE,
+    GraspReport,
+    MoveVerdict,
+    Shape,
+    Workspace,
+)
 from geometry.hand import MAX_GRASP_WIDTH, FingerModel, Grasp, MoveCheck, Obstacle, plan_grasps
 from toolbox.errors import ToolboxError
 
 __all__ = [
+    "FINGER_DEPTH",
+    "FINGER_WIDTH",
     "JAW_CLEARANCES",
     "MAX_GRASP_WIDTH",
     "MAX_OPENING",
     "PLACEMENT",
+    "PLACEMENT_SPREAD",
     "WORKSPACE",
     "Grasp",
     "GraspReport",
@@ -52,6 +67,9 @@ __all__ = [
 
 MAX_OPENING = STROKE.max_gap  # [m] widest the 2F-85's jaws open
 JAW_CLEARANCES = FingerModel().clearances  # [m] per side, beyond the gripped width
+# [m] a fingertip's extent outwards from its pad face, and across the closing direction
+FINGER_DEPTH = FingerModel().segments[0][2]
+FINGER_WIDTH = 2 * FingerModel().segments[0][3]
 
 
 class Hand:

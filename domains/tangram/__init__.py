@@ -23,7 +23,7 @@ from domains.errors import GenerationError
 from domains.generation import retry
 from domains.registry import register
 from domains.tangram.figures import OBJECTS, UNIT
-from geometry import TOLERANCES, Body, Workspace, place, yaw_of, yaw_pose
+from geometry import PLACEMENT_SPREAD, TOLERANCES, Body, Workspace, place, yaw_of, yaw_pose
 
 # Benchmark goal k uses the k-th figure (goal 1, the reference, is the square); free draws
 # use any figure. Test goal k uses the k-th test figure; free test draws any test figure.
@@ -53,7 +53,7 @@ class Tangram(Domain):
     on_gap = 0.005
     adjacent_gap = 0.008
     temp_clearance = 0.03
-    placement_spread = (0.0015, 0.0015)
+    placement_spread = PLACEMENT_SPREAD
     properties = {  # noqa: RUF012
         "perceive": [
             ("never_mirrored", {"meshes": ["parallelogram"]}),

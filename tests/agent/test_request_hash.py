@@ -1,12 +1,21 @@
 """A request's hash: what strict replay matches a recorded response by."""
 
-from agent.clients.base import ModelRequest, TextBlock
+from types import SimpleNamespace
 
-SLOW = (
-    "`perceive` takes {t} s of CPU per call (median of 7 calls; slowest {u} s on seed1/start/"
-    'front), over its online budget of {b} s\n- actual: `"median {t} s"`\n'
-    "- metrics: calls = 7, max_s = {u}, median_s = {t}"
-)
+from agent.clients.base import ModelRequest, TextBlock
+from checks.context import check_fast_enough
+from checks.report import build_report, report_markdown
+
+
+def _slow_report(times: list[float], *, budget: float = 0.6) -> str:
+    """The feedback Markdown of a draft that fails `interface.fast_enough` (the real check)."""
+    cases = ["seed1/start/front", "seed2/goal/view1", "seed3/start/view2"]
+    draft = SimpleNamespace(seconds=[(cases[i % 3], t) for i, t in enumerate(times)])
+    check = check_fast_enough("perceive", draft, budget)
+    assert check.failing
+    return report_markdown(
+        build_report(domain="cubes", function="perceive", source="x = 1", checks=[check])
+    )
 
 
 def _request(text: str) -> ModelRequest:
@@ -19,18 +28,17 @@ def _request(text: str) -> ModelRequest:
 
 
 def test_measured_timings_do_not_change_the_hash():
-    a = _request(SLOW.format(t="1.674", u="1.750", b="0.6"))
-    b = _request(SLOW.format(t="2.031", u="2.4", b="0.6").replace("seed1/start", "seed2/goal"))
-    assert a.hash == b.hash
+    here = _slow_report([1.674, 1.75, 1.6, 1.7, 1.1, 1.3, 1.69])
+    there = _slow_report([2.031, 2.4, 2.2, 1.9, 3.1, 2.0, 2.1])
+    assert here != there  # the model reads what was measured ...
+    assert _request(here).hash == _request(there).hash  # ... the hash leaves it out
 
 
 def test_everything_else_does():
-    base = _request(SLOW.format(t="1.674", u="1.750", b="0.6"))
-    assert _request(SLOW.format(t="1.674", u="1.750", b="0.5")).hash != base.hash  # the budget
-    assert (
-        _request(SLOW.format(t="1.674", u="1.750", b="0.6").replace("7 calls", "8 calls")).hash
-        != base.hash
-    )
+    times = [1.674, 1.75, 1.6, 1.7, 1.1, 1.3, 1.69]
+    base = _request(_slow_report(times)).hash
+    assert _request(_slow_report(times, budget=0.5)).hash != base  # the budget
+    assert _request(_slow_report(times[:6])).hash != base  # how many calls
     assert (
         _request("the plan moves 'red' by 1.674 s").hash
         != _request("the plan moves 'red' by 2.5 s").hash

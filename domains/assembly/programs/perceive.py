@@ -73,6 +73,7 @@ FINE_ITERATIONS = 8
 GRID_CELL = 0.0025  # [m]
 GRID_MARGIN = 0.025  # [m]
 NEIGHBOURS = 6
+BOX_MARGIN = 4  # [px] around a part's pixels: its morphology sees nothing beyond
 
 _CACHE = {}
 
@@ -103,6 +104,9 @@ class _Model:
         _, near = cKDTree(self.samples).query(centres, k=NEIGHBOURS)
         self.grid_lo, self.grid_shape = lo, shape
         self.grid = near.reshape(-1, NEIGHBOURS).astype(np.int64)  # cells in C order
+        self.grid_strides = np.array([shape[1] * shape[2], shape[2], 1], dtype=np.int64)
+        # each cell's nearest samples and their normals in one block: one gather per point
+        self.cell_surface = np.hstack([self.samples, self.normals])[self.grid]
         self.shape = Shape.from_mesh(mesh)
         rests = stable_poses(self.shape)
         # the part's own upright pose first, then the others steadiest first
@@ -139,7 +143,8 @@ def _pose(R, t):
 
 
 def _labels(rgb):
-    """Per-pixel part index into PARTS (-1: not a part)."""
+    """Per-pixel part index into PARTS (-1: not a part), and the box (row slice, column
+    slice) around each part's pixels, with room for the morphology."""
     hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV_FULL)
     ok = (hsv[..., 1] >= SAT_MIN * 255) & (hsv[..., 2] >= VAL_MIN * 255)
     labels = np.full(rgb.shape[:2], -1, dtype=np.int32)
@@ -149,8 +154,16 @@ def _labels(rgb):
     d = np.abs((h[:, None] - hues + 180.0) % 360.0 - 180.0)
     best = np.argmin(d, axis=1)
     near = d[np.arange(len(h)), best] <= HUE_TOL
-    labels[v[near], u[near]] = best[near]
-    return labels
+    v, u, best = v[near], u[near], best[near]
+    labels[v, u] = best
+    boxes = {}
+    for k in np.unique(best):
+        rows, cols = v[best == k], u[best == k]
+        boxes[int(k)] = (
+            slice(max(rows.min() - BOX_MARGIN, 0), rows.max() + BOX_MARGIN + 1),
+            slice(max(cols.min() - BOX_MARGIN, 0), cols.max() + BOX_MARGIN + 1),
+        )
+    return labels, boxes
 
 
 def _mask(labels, k):
@@ -167,10 +180,12 @@ def _mask(labels, k):
     return mask.astype(bool), int(opened.sum())
 
 
-def _points(mask, depth, camera, n_max):
+def _points(mask, box, depth, camera, n_max):
+    """World points of the mask's pixels (the mask covers `box` of the image)."""
     K = np.asarray(camera["K"], dtype=float)
     T = np.asarray(camera["T_world_camera"], dtype=float)
-    v, u = np.nonzero(mask & (depth > 0))
+    v, u = np.nonzero(mask & (depth[box] > 0))
+    v, u = v + box[0].start, u + box[1].start
     if len(u) > n_max:  # an even, deterministic subsample
         keep = np.linspace(0, len(u) - 1, n_max).round().astype(int)
         u, v = u[keep], v[keep]
@@ -191,78 +206,103 @@ def _inliers(pts, size):
 # -- fitting --------------------------------------------------------------------------------
 
 
-def _match(model, R, t, pts, eye):
-    """Model samples (world) and normals matched to the points, facing the camera; weights and
-    distances [m]."""
-    q = (pts - t) @ R  # object frame
+def _nearest(model, Rs, ts, pts, eye, index=False):
+    """For poses (Rs (b, 3, 3), ts (b, 3)) at once: the model sample matched to each point,
+    facing the camera where one is near: weight and distance [m], each (b, n), and with
+    `index` the sample's index too."""
+    q = (pts[None] - ts[:, None]) @ Rs  # object frame
     cell = ((q - model.grid_lo) * (1.0 / GRID_CELL)).astype(np.int64)
     np.clip(cell, 0, model.grid_shape - 1, out=cell)
-    idx = model.grid[
-        (cell[:, 0] * model.grid_shape[1] + cell[:, 1]) * model.grid_shape[2] + cell[:, 2]
-    ]
-    view = (eye - pts) @ R  # towards the camera, object frame
-    facing = np.einsum("nkd,nd->nk", model.normals[idx], view) > 0
-    diff = model.samples[idx] - q[:, None, :]
-    d2 = np.einsum("nkd,nkd->nk", diff, diff) + ~facing  # turned away: only when nothing is near
-    first = d2.argmin(axis=1)
-    rows = np.arange(len(pts))
-    j = idx[rows, first]
-    ok = facing[rows, first]
+    cells = cell @ model.grid_strides
+    near = model.cell_surface[cells]  # the cells' samples and normals, (b, n, k, 6)
+    view = (eye - pts)[None] @ Rs  # towards the camera, object frame
+    facing = np.einsum("bnkd,bnd->bnk", near[..., 3:], view) > 0
+    diff = near[..., :3] - q[:, :, None, :]
+    d2 = np.einsum("bnkd,bnkd->bnk", diff, diff) + ~facing  # turned away: only if nothing near
+    b, n, k = d2.shape
+    flat = np.arange(b * n) * k + d2.argmin(axis=2).ravel()  # the nearest of the k, per point
+    ok = facing.ravel()[flat].reshape(b, n)
+    dist = np.sqrt(np.maximum(d2.ravel()[flat].reshape(b, n) - ~ok, 0.0))
     w = np.where(ok, 1.0, 0.2)
-    dist = np.sqrt(np.maximum(d2[rows, first] - ~ok, 0.0))
-    return model.samples[j] @ R.T + t, model.normals[j] @ R.T, w, dist
+    if not index:
+        return w, dist
+    return w, dist, model.grid[cells].ravel()[flat].reshape(b, n)
 
 
-def _icp(model, k, params, pts, eye, iterations):
-    """Point-to-plane Gauss–Newton on (x, y, z, yaw) in resting pose k; the part never sinks
-    into the table."""
+def _turned(yaws, R0):
+    """The rotations Rz(yaw) @ R0, (b, 3, 3)."""
+    c, s = np.cos(yaws), np.sin(yaws)
+    Rz = np.zeros((len(c), 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    return Rz @ R0
+
+
+def _icp(model, k, starts, pts, eye, iterations):
+    """Point-to-plane Gauss–Newton on (x, y, z, yaw) in resting pose k, from each start (b, 4)
+    at once, each until its steps are negligible; the part never sinks into the table."""
     R0 = model.rests[k]
     floor = -model.lowest[k] - 0.002
-    x = np.array(params, dtype=float)
-    x[2] = max(x[2], floor)
+    X = np.array(starts, dtype=float).reshape(-1, 4)
+    X[:, 2] = np.maximum(X[:, 2], floor)
+    active = np.arange(len(X))
+    damping = np.diag([1e-3, 1e-3, 1e-2, 1e-4])
     for _ in range(iterations):
-        R = _rz(x[3]) @ R0
-        c, n, w, _ = _match(model, R, x[:3], pts, eye)
-        r = np.einsum("ij,ij->i", n, pts - c)
+        Rs = _turned(X[active, 3], R0)
+        Rt, t = Rs.transpose(0, 2, 1), X[active, None, :3]
+        w, _, j = _nearest(model, Rs, X[active, :3], pts, eye, index=True)
+        c, n = model.samples[j] @ Rt + t, model.normals[j] @ Rt
+        r = np.einsum("bnd,bnd->bn", n, pts - c)
         w = w * np.minimum(1.0, TRUNCATE / np.maximum(np.abs(r), 1e-9))
-        w = np.where(np.linalg.norm(pts - c, axis=1) > 3 * TRUNCATE, 0.0, w)
-        arm = c - x[:3]
-        J = np.c_[-n, -(n[:, 1] * arm[:, 0] - n[:, 0] * arm[:, 1])]  # d r / d (x, y, z, yaw)
-        A = (J * w[:, None]).T @ J + np.diag([1e-3, 1e-3, 1e-2, 1e-4]) * max(w.sum(), 1.0) * 1e-3
-        b = -(J * w[:, None]).T @ r
-        step = np.linalg.solve(A, b)
-        step[:3] = np.clip(step[:3], -0.02, 0.02)
-        step[3] = np.clip(step[3], -0.3, 0.3)
-        x += step
-        x[2] = max(x[2], floor)
-        if np.abs(step[:3]).max() < 2e-5 and abs(step[3]) < 1e-4:
+        w = np.where(np.linalg.norm(pts - c, axis=2) > 3 * TRUNCATE, 0.0, w)
+        arm = c - t
+        turn = -(n[..., 1] * arm[..., 0] - n[..., 0] * arm[..., 1])
+        J = np.concatenate([-n, turn[..., None]], axis=2)  # d r / d (x, y, z, yaw)
+        Jw = (J * w[..., None]).transpose(0, 2, 1)
+        A = Jw @ J + damping * np.maximum(w.sum(axis=1), 1.0)[:, None, None] * 1e-3
+        step = np.linalg.solve(A, -(Jw @ r[..., None]))[..., 0]
+        step[:, :3] = np.clip(step[:, :3], -0.02, 0.02)
+        step[:, 3] = np.clip(step[:, 3], -0.3, 0.3)
+        X[active] += step
+        X[active, 2] = np.maximum(X[active, 2], floor)
+        done = (np.abs(step[:, :3]).max(axis=1) < 2e-5) & (np.abs(step[:, 3]) < 1e-4)
+        active = active[~done]
+        if not len(active):
             break
-    return x
+    return X
+
+
+def _scores(model, R0, X, pts, eye, view):
+    """Lower is better, for the poses X (b, 4: x, y, z, yaw in resting pose R0) at once: mean
+    truncated distance of the points to the facing model surface, plus the share of the
+    model's camera-facing surface that would hide what the camera sees. (scores, fits)."""
+    X = np.asarray(X, dtype=float)
+    Rs = _turned(X[:, 3], R0)
+    w, d = _nearest(model, Rs, X[:, :3], pts, eye)
+    fit = np.mean(np.minimum(d, TRUNCATE) * np.where(w < 1, 1.5, 1.0), axis=1)
+    Rt = Rs.transpose(0, 2, 1)
+    s = model.samples[model.probe] @ Rt + X[:, None, :3]  # (b, p, 3) world
+    n = model.normals[model.probe] @ Rt
+    ray = eye - s
+    cos = np.einsum("bpd,bpd->bp", n, ray) / np.linalg.norm(ray, axis=2)
+    judged = cos > GRAZING  # faces seen at a grazing angle fall on their neighbours' pixels
+    depth, K, R_cw, t_cw = view
+    cam = s @ R_cw.T + t_cw
+    z = cam[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.round(K[0, 0] * cam[..., 0] / z + K[0, 2])
+        v = np.round(K[1, 1] * cam[..., 1] / z + K[1, 2])
+    h, wd = depth.shape
+    inside = judged & (z > 0) & (u >= 0) & (u < wd) & (v >= 0) & (v < h)
+    seen = depth[np.where(inside, v, 0).astype(np.int64), np.where(inside, u, 0).astype(np.int64)]
+    through = inside & (seen > 0) & (seen > z + SEEN_THROUGH)
+    violation = through.sum(axis=1) / np.maximum(inside.sum(axis=1), 1)  # beyond: no evidence
+    return fit + VIOLATION_WEIGHT * violation, fit
 
 
 def _score(model, R0, x, pts, eye, view):
-    """Lower is better: mean truncated distance of the points to the facing model surface, plus
-    the share of the model's camera-facing surface that would hide what the camera sees."""
-    R = _rz(x[3]) @ R0
-    _, _, w, d = _match(model, R, x[:3], pts, eye)
-    fit = float(np.mean(np.minimum(d, TRUNCATE) * np.where(w < 1, 1.5, 1.0)))
-    s = model.samples[model.probe] @ R.T + x[:3]
-    n = model.normals[model.probe] @ R.T
-    ray = eye - s
-    cos = np.einsum("ij,ij->i", n, ray) / np.linalg.norm(ray, axis=1)
-    s = s[cos > GRAZING]  # faces seen at a grazing angle fall on their neighbours' pixels
-    depth, K, R_cw, t_cw = view
-    cam = s @ R_cw.T + t_cw
-    z = cam[:, 2]
-    u = np.round(K[0, 0] * cam[:, 0] / z + K[0, 2]).astype(int)
-    v = np.round(K[1, 1] * cam[:, 1] / z + K[1, 2]).astype(int)
-    h, wd = depth.shape
-    inside = (z > 0) & (u >= 0) & (u < wd) & (v >= 0) & (v < h)
-    seen = depth[np.clip(v, 0, h - 1), np.clip(u, 0, wd - 1)]
-    valid = inside & (seen > 0)
-    through = valid & (seen > z + SEEN_THROUGH)
-    violation = through.sum() / max(int(inside.sum()), 1)  # beyond the image: no evidence
-    return fit + VIOLATION_WEIGHT * violation, fit
+    """`_scores` of one pose: (score, fit)."""
+    score, fit = _scores(model, R0, np.asarray(x, dtype=float)[None], pts, eye, view)
+    return float(score[0]), float(fit[0])
 
 
 def _visible_centre(model, R, t, view):
@@ -320,7 +360,7 @@ class _Part:
         top = float(np.percentile(pts[:, 2], 97))
         length = float(np.ptp((np.concatenate(model.shape.pieces) @ R0.T)[:, 0]))
         shifts = (0.0, -length / 4, length / 4) if length > 0.06 else (0.0,)
-        starts = []
+        starts, Rs = [], []
         for j in range(8):
             yaw = self.heading + j * np.pi / 4
             R = _rz(yaw) @ R0
@@ -328,15 +368,17 @@ class _Part:
             t[2] = top - model.highest[k]  # the top shows from above, even when cut off
             for n, shift in enumerate(shifts):  # partly hidden long parts: along their length
                 t1 = t + shift * R[:, 0] * [1, 1, 0] / max(np.linalg.norm(R[:2, 0]), 1e-9)
-                x = np.array([t1[0], t1[1], t1[2], yaw])
-                d = _match(model, R, t1, self.coarse, self.eye)[3]
-                starts.append((float(np.mean(np.minimum(d, 3 * TRUNCATE))), j, n, x))
-        starts.sort(key=lambda t: t[:3])
-        keep = [next(t for t in starts if t[1] == j) for j in range(8)]  # every heading
-        for _, j, n, x in keep:  # from its offset nearest to the points
-            x = _icp(model, k, x, self.coarse, self.eye, 4)
-            score = _score(model, R0, x, self.coarse, self.eye, self.view)[0]
-            self.tries.append((score + OTHER_POSE_PENALTY * (k > 0), k, j, n, x))
+                starts.append((j, n, np.array([t1[0], t1[1], t1[2], yaw])))
+                Rs.append(R)
+        X = np.array([x for _, _, x in starts])
+        d = _nearest(model, np.array(Rs), X[:, :3], self.coarse, self.eye)[1]
+        spread = np.mean(np.minimum(d, 3 * TRUNCATE), axis=1)
+        ranked = sorted((float(e), j, n, x) for e, (j, n, x) in zip(spread, starts, strict=True))
+        keep = [next(t for t in ranked if t[1] == j) for j in range(8)]  # every heading
+        fitted = _icp(model, k, [x for *_, x in keep], self.coarse, self.eye, 4)  # from the
+        scores = _scores(model, R0, fitted, self.coarse, self.eye, self.view)[0]  # nearest offset
+        for (_, j, n, _), x, score in zip(keep, fitted, scores, strict=True):
+            self.tries.append((float(score) + OTHER_POSE_PENALTY * (k > 0), k, j, n, x))
         self.tries.sort(key=lambda t: t[:4])
         self.rests_tried = k + 1
 
@@ -356,14 +398,17 @@ class _Part:
             d = np.min([np.linalg.norm(up - a, axis=1) for a in anchors], axis=0)
             anchors.append(up[int(np.argmax(d))])
         centre = self.pts.mean(axis=0)
+        keys, starts = [], []
         for j in range(16):
             yaw = self.heading + (j + 0.5) * np.pi / 8
             R = _rz(yaw) @ R0
             for n, a in enumerate(anchors):
-                t = centre - R @ a
-                x = _icp(model, 0, [t[0], t[1], t[2], yaw], self.coarse, self.eye, 4)
-                score = _score(model, R0, x, self.coarse, self.eye, self.view)[0]
-                self.tries.append((score, 0, 100 + j, n, x))
+                starts.append([*(centre - R @ a), yaw])
+                keys.append((100 + j, n))
+        fitted = _icp(model, 0, starts, self.coarse, self.eye, 4)
+        scores = _scores(model, R0, fitted, self.coarse, self.eye, self.view)[0]
+        for (j, n), x, score in zip(keys, fitted, scores, strict=True):
+            self.tries.append((float(score), 0, j, n, x))
         self.tries.sort(key=lambda t: t[:4])
 
     def refine(self, n):
@@ -374,7 +419,7 @@ class _Part:
             if (k, j, m) in self.refined:
                 continue
             self.refined.add((k, j, m))
-            self.add(k, _icp(self.model, k, x, self.pts, self.eye, FINE_ITERATIONS))
+            self.add(k, _icp(self.model, k, [x], self.pts, self.eye, FINE_ITERATIONS)[0])
 
     def add(self, k, x):
         R0 = self.model.rests[k]
@@ -392,20 +437,21 @@ class _Part:
         self.hyps.sort(key=lambda h: h[0])
 
     def _slide(self, R0, x, score, fit):
-        """Pattern search on the full score (points and free space) around x."""
+        """Pattern search on the full score (points and free space) around x: each axis in
+        turn, one step up or else down where that scores better, then smaller steps."""
         steps = np.array([0.008, 0.008, 0.0, np.radians(4.0)])
+        axes = [d for d in range(4) if steps[d] > 0]
         for _ in range(24):
-            moved = False
-            for d in range(4):
-                if steps[d] == 0:
-                    continue
-                for sign in (1.0, -1.0):
-                    y = x.copy()
-                    y[d] += sign * steps[d]
-                    sc, ft = _score(self.model, R0, y, self.pts, self.eye, self.view)
-                    if sc < score - 1e-7:
-                        x, score, fit, moved = y, sc, ft, True
-                        break
+            moved, pending = False, list(axes)
+            while pending:  # the remaining axes' steps from the current x, scored at once
+                trials = [x + sign * steps[d] * np.eye(4)[d] for d in pending for sign in (1, -1)]
+                sc, ft = _scores(self.model, R0, trials, self.pts, self.eye, self.view)
+                better = np.flatnonzero(sc < score - 1e-7)
+                if not len(better):
+                    break
+                b = int(better[0])  # the first axis that improves moves; later ones restart
+                x, score, fit, moved = trials[b], float(sc[b]), float(ft[b]), True
+                pending = pending[b // 2 + 1 :]
             if not moved:
                 steps = steps / 2
                 if steps[0] < 0.0005:
@@ -431,15 +477,14 @@ class _Part:
         length = float(np.ptp((np.concatenate(model.shape.pieces) @ model.rests[k].T)[:, 0]))
         yaw = float(np.arctan2(R[1, 0], R[0, 0]))
         load = np.average(np.array(coms)[:, :2], axis=0, weights=masses)
+        offsets = np.arange(-length / 2, length / 2 + 1e-9, SLIDE_STEP)
+        turns = np.radians([0.0, -2.0, 2.0, -4.0, 4.0])  # the far end swings
+        X = np.array([[*(h[3] + d * u), yaw + turn] for d in offsets for turn in turns])
+        sc, ft = _scores(model, model.rests[k], X, self.pts, self.eye, self.view)
         rows = []
-        for d in np.arange(-length / 2, length / 2 + 1e-9, SLIDE_STEP):
-            best_here = None
-            for turn in np.radians([0.0, -2.0, 2.0, -4.0, 4.0]):  # the far end swings
-                x = np.array([*(h[3] + d * u), yaw + turn])
-                sc = _score(model, model.rests[k], x, self.pts, self.eye, self.view)
-                if best_here is None or sc[0] < best_here[0][0]:
-                    best_here = (sc, d, x)
-            rows.append(best_here)
+        for a, d in enumerate(offsets):  # the best turn at each offset (the first of equals)
+            b = a * len(turns) + int(np.argmin(sc[a * len(turns) : (a + 1) * len(turns)]))
+            rows.append(((float(sc[b]), float(ft[b])), d, X[b]))
         best = min(r[0][0] for r in rows)
         if best > h[0] + TIE:
             return h
@@ -460,9 +505,9 @@ class _Part:
                 continue
             yaw0 = float(np.arctan2(T[1, 0], T[0, 0]))
             z = self.hyps[0][3][2]
-            for k in range(4):
-                x0 = [T[0, 3], T[1, 3], z, yaw0 + k * np.pi / 2]
-                self.add(0, _icp(self.model, 0, x0, self.pts, self.eye, FINE_ITERATIONS))
+            starts = [[T[0, 3], T[1, 3], z, yaw0 + k * np.pi / 2] for k in range(4)]
+            for x in _icp(self.model, 0, starts, self.pts, self.eye, FINE_ITERATIONS):
+                self.add(0, x)
 
 
 # -- physics -------------------------------------------------------------------------------
@@ -650,19 +695,20 @@ def perceive(observation, meshes, camera):
     # of its neighbourhood is farther (silhouette pixels are not evidence)
     near = cv2.erode(np.where(depth > 0, depth, np.float32(1e3)), np.ones((3, 3), np.uint8))
     view = (np.where(near < 1e3, near, 0.0), K, T_wc[:3, :3].T, -T_wc[:3, :3].T @ T_wc[:3, 3])
-    labels = _labels(rgb)
+    labels, boxes = _labels(rgb)
     ids = [i for i in PARTS if PARTS[i][0] in meshes]
     models = {i: _model(meshes[PARTS[i][0]]) for i in ids}
     shapes = {i: models[i].shape for i in ids}  # by id, and by mesh key for the toolbox
     shapes.update({PARTS[i][0]: models[i].shape for i in ids})
     parts = {}
     for k, i in enumerate(PARTS):
-        if i not in models:
+        if i not in models or k not in boxes:
             continue
-        mask, count = _mask(labels, k)
+        mask, count = _mask(labels[boxes[k]], k)
         if mask is None:
             continue
-        pts = _inliers(_points(mask, depth, camera, FINE_POINTS), float(models[i].extent.max()))
+        pts = _points(mask, boxes[k], depth, camera, FINE_POINTS)
+        pts = _inliers(pts, float(models[i].extent.max()))
         if len(pts) >= 10:
             parts[i] = _Part(i, models[i], pts, count, eye, view)
     missing = [i for i in ids if i not in parts]

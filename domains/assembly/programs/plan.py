@@ -39,7 +39,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
-from toolbox.robot import PLACEMENT, WORKSPACE, Hand
+from toolbox.robot import FINGER_DEPTH, JAW_CLEARANCES, PLACEMENT, WORKSPACE, Hand
 
 DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
@@ -51,7 +51,11 @@ TOUCH = 0.001  # a placement may touch others this deep [m]
 # temporary places keep this far inside the robot's workspace, where the arm is comfortable [m]
 REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 GRID = 0.01  # spacing of candidate temporary places [m]
-CLEARANCES = ((0.03, 0.01), (0.015, 0.005), (0.008, 0.0))  # (to parts, to unbuilt goals) [m]
+# how far an open finger reaches beyond the side of the part it grips: the jaws' clearance, a
+# fingertip's depth and a margin (toolbox.robot.JAW_CLEARANCES, FINGER_DEPTH)
+FINGER_REACH = JAW_CLEARANCES[0] + FINGER_DEPTH + 0.002  # [m]
+# (to parts, to unbuilt goals) [m], roomiest first: room for both fingers, then less
+CLEARANCES = ((FINGER_REACH, JAW_CLEARANCES[0]), (0.015, 0.005), (JAW_CLEARANCES[0], 0.0))
 
 
 def _box(sx, sy, sz, x0=0.0, z0=0.0):

@@ -44,7 +44,7 @@ knob's two axes.
 import numpy as np
 
 from toolbox.packing import finger_footprints, polygon_gap, spread_footprints
-from toolbox.robot import JAW_CLEARANCES, PLACEMENT, WORKSPACE
+from toolbox.robot import JAW_CLEARANCES, PLACEMENT, PLACEMENT_SPREAD, WORKSPACE
 
 SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "large_triangle": 1,
@@ -62,8 +62,8 @@ ON_TABLE = 0.005  # a goal piece's origin this far from z = 0 is not on the tabl
 CROWDED = 0.004  # goal pieces overlapping deeper than this cannot both be built [m]
 DONE_POS = 0.002  # a piece this close to its goal stays where it is [m]
 DONE_YAW = np.radians(2.0)
-SPREAD_GAP = 0.0015  # gaps opened between goal pieces [m]
-SPREAD_SHIFT = 0.0015  # … moving no piece more than this [m]
+# gaps opened between goal pieces, moving no piece more than this (the executor can hit it) [m]
+SPREAD_GAP, SPREAD_SHIFT = PLACEMENT_SPREAD
 FREE_GAP = 0.001  # a target this close to a piece not yet at its goal is occupied [m]
 PLACED_GAP = -0.0005  # … to a piece at its goal (spreading could not open everything) [m]
 EASY_TURN = np.radians(70.0)  # a turn the wrist manages with either of two grasps
