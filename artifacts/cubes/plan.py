@@ -17,33 +17,28 @@ plan checks use) finds a grasp with room among the other cubes at the pick and a
 and when it does not take away the last grasp of a cube that still has to move. A cube in the
 fingers' way goes to a temporary place first. When no order satisfies that, the plan falls
 back to the geometric order alone. Goals must lie inside the robot's workspace
-(`toolbox.robot.WORKSPACE`); temporary places keep well inside it.
+(`toolbox.robot.WORKSPACE`); temporary places are in the placement region
+(`toolbox.robot.PLACEMENT`), where the arm is comfortable.
 """
 
 import numpy as np
 
 from toolbox import cube_symmetries
-from toolbox.robot import WORKSPACE, Hand, Workspace
+from toolbox.robot import PLACEMENT, WORKSPACE, Hand, Workspace
 
 SIDE = 0.04  # cube edge [m]
 HALF = SIDE / 2
 ON_GAP = 0.008  # vertical gap still read as resting on [m]
 SAME = 0.004  # a cube this close to its goal position counts as placed [m]
 SAME_YAW = np.radians(4.0)  # … and this close in yaw, modulo 90°
-# goals may lie anywhere in the workspace (with 5 mm of slack for perception); temporary
-# places keep this far inside it, where the arm is comfortable [m]
+# goals may lie anywhere in the workspace (with 5 mm of slack for perception) [m]
 SLACK = 0.005
-INSIDE = 0.08
 GOALS = Workspace(
     x=(WORKSPACE.x[0] - SLACK, WORKSPACE.x[1] + SLACK),
     y=(WORKSPACE.y[0] - SLACK, WORKSPACE.y[1] + SLACK),
     reach=WORKSPACE.reach + SLACK,
 )
-REGION = Workspace(
-    x=(WORKSPACE.x[0] + INSIDE, WORKSPACE.x[1] - INSIDE),
-    y=(WORKSPACE.y[0] + INSIDE, WORKSPACE.y[1] - INSIDE),
-    reach=WORKSPACE.reach - INSIDE,
-)
+REGION = PLACEMENT  # where cubes are put aside
 GRID = 0.01  # spacing of candidate temporary places [m]
 CLEARANCE = 0.03  # free gap around a temporary place, for the gripper's fingers [m]
 GOAL_CLEARANCE = 0.012  # gap between a temporary place and goals still to build [m]

@@ -71,3 +71,42 @@ def test_plans_take_the_hand_and_the_workspace_from_the_toolbox(path):
         for alias in node.names
     }
     assert "WORKSPACE" in imported, f"{path} does not take the workspace from toolbox.robot"
+
+
+def _plan_module(path: Path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"_reference_plan_{path.parts[-3]}", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize(
+    "path", [p for p in PROGRAMS if p.name == "plan.py"], ids=lambda p: p.parts[-3]
+)
+def test_plans_derive_no_region_that_reproduces_the_generators(path):
+    """A region built from the workspace by a margin that happens to land on the generator's
+    placement region (WORKSPACE.y ± 8 cm is PLACEMENT.y) is the generator's constant in
+    disguise, which a literal search cannot see: a plan's module-level regions and bound pairs
+    either are `toolbox.robot.PLACEMENT` (or its x / y) or share no edge with it."""
+    placement = Domain.placement
+    edges = {round(v, 6) for v in (*placement.x, *placement.y)}
+    module = _plan_module(path)
+    derived = []
+    for name, value in vars(module).items():
+        if value is placement or value is placement.x or value is placement.y:
+            continue
+        if isinstance(value, type(placement)):
+            bounds = (*value.x, *value.y)
+        elif isinstance(value, tuple) and len(value) == 2 and all(
+            isinstance(v, float) for v in value
+        ):
+            bounds = value
+        else:
+            continue
+        shared = {round(v, 6) for v in bounds} & edges
+        if shared:
+            derived.append((name, sorted(shared)))
+    assert not derived, f"{path}: regions that reproduce the placement region's edges: {derived}"
