@@ -267,13 +267,24 @@ def _over(p, q, half):
     return abs(c * d[0] + s * d[1]) <= half and abs(-s * d[0] + c * d[1]) <= half
 
 
-def _repair(fits, placed, half, missing):
+def _column_fits(p, q, pts, half):
+    """Whether a barely seen cube's points lie on it centred under the cube p above it as well
+    as on its own fit q (within 2 mm, or within 3 mm of its surface at all)."""
+    aligned = np.array([p[0], p[1], q[2], p[3]])
+    fitted = float(np.median(np.abs(_residuals(q, pts, half))))
+    there = float(np.median(np.abs(_residuals(aligned, pts, half))))
+    return there <= max(0.003, fitted + 0.002)
+
+
+def _repair(fits, placed, half, missing, clouds):
     """Put barely seen or unseen cubes where the cubes above them need them.
 
     In a pyramid an upper cube rests centred between two cubes. When it would rest on a
     single cube, off-centre, the second supporter is hidden: an unseen cube (or the barely
     seen one nearest) goes to the mirror image of the first about the upper cube's centre.
-    When a barely seen cube is one of two supporters, it is centred the same way.
+    When a barely seen cube is one of two supporters, it is centred the same way. A barely
+    seen cube that is the only support of the cube above it (a column) is centred under it
+    when what shows of it agrees: a sliver of a face pins down little, the cube above it more.
     """
     weak = {n for n, (_, _, pixels) in fits.items() if pixels < WEAK_PIXELS}
     weak |= set(placed) - set(fits)
@@ -298,9 +309,17 @@ def _repair(fits, placed, half, missing):
                     placed[b] = spot
                     changed = True
                 continue
-            if len(under) != 1 or _over(p, placed[under[0]], half):
+            if len(under) != 1:
                 continue
             a = placed[under[0]]
+            if _over(p, a, half):
+                b = under[0]
+                moved = np.hypot(*(p[:2] - a[:2])) > 1e-4 or abs(p[3] - a[3]) > 1e-4
+                if b in weak and b in clouds and moved and _column_fits(p, a, clouds[b][0], half):
+                    placed[b] = np.array([p[0], p[1], a[2], p[3]])
+                    changed = True
+                    break
+                continue
             spot = np.array([2 * p[0] - a[0], 2 * p[1] - a[1], a[2], a[3]])
             options = [n for n in weak if n not in (name, under[0])]
             if not unseen and under[0] in weak:  # a column: the barely seen cube is under it
@@ -368,7 +387,7 @@ def perceive(observation, meshes, camera):
             fits[name] = (p, top, pixels)
     missing = [n for n in HUES if n not in fits]
     placed = _settle(fits, list(missing), half)
-    placed = _repair(fits, placed, half, missing)
+    placed = _repair(fits, placed, half, missing, clouds)
     records = []
     for name in HUES:
         if name not in placed:
