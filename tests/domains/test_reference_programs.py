@@ -100,8 +100,10 @@ def test_plans_derive_no_region_that_reproduces_the_generators(path):
             continue
         if isinstance(value, type(placement)):
             bounds = (*value.x, *value.y)
-        elif isinstance(value, tuple) and len(value) == 2 and all(
-            isinstance(v, float) for v in value
+        elif (
+            isinstance(value, tuple)
+            and len(value) == 2
+            and all(isinstance(v, float) for v in value)
         ):
             bounds = value
         else:
