@@ -39,7 +39,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
-from toolbox.robot import FINGER_DEPTH, JAW_CLEARANCES, PLACEMENT, WORKSPACE, Hand
+from toolbox.robot import FINGER_DEPTH, JAW_CLEARANCES, MAX_OPENING, PLACEMENT, WORKSPACE, Hand
 
 DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
@@ -54,8 +54,17 @@ GRID = 0.01  # spacing of candidate temporary places [m]
 # how far an open finger reaches beyond the side of the part it grips: the jaws' clearance, a
 # fingertip's depth and a margin (toolbox.robot.JAW_CLEARANCES, FINGER_DEPTH)
 FINGER_REACH = JAW_CLEARANCES[0] + FINGER_DEPTH + 0.002  # [m]
-# (to parts, to unbuilt goals) [m], roomiest first: room for both fingers, then less
-CLEARANCES = ((FINGER_REACH, JAW_CLEARANCES[0]), (0.015, 0.005), (JAW_CLEARANCES[0], 0.0))
+# (to parts, to unbuilt goals) [m], roomiest first: room for both fingers; then half-way to the
+# open jaws' clearance and the jaws' narrower clearance to goals; then the open jaws only
+CLEARANCES = (
+    (FINGER_REACH, JAW_CLEARANCES[0]),
+    ((FINGER_REACH + JAW_CLEARANCES[0]) / 2, JAW_CLEARANCES[1]),
+    (JAW_CLEARANCES[0], 0.0),
+)
+# the open hand across its closing direction: the widest opening and a fingertip on each side;
+# a part farther than this from another's box cannot take a grasp of it [m]
+HAND_SPAN = MAX_OPENING + 2 * FINGER_DEPTH
+SLIVER = 0.0002  # outlines overlapping deeper than this are above one another (not rounding) [m]
 
 
 def _box(sx, sy, sz, x0=0.0, z0=0.0):
@@ -102,17 +111,17 @@ PIECES = {  # the task's parts, origin at the centre of the bottom of their upri
     "block": [_box(0.05, DEPTH, 0.03)],
     "cylinder": _cylinder(),
     "roof": [_profile([(-0.07, 0), (0.07, 0), (0, 0.04)])],
-    "lblock": [_box(0.08, DEPTH, 0.03), _box(0.03, DEPTH, 0.04, x0=-0.025, z0=0.03)],
+    "lblock": [_box(0.08, DEPTH, 0.03), _box(0.03, DEPTH, 0.04, x0=-(0.08 - 0.03) / 2, z0=0.03)],
     "arch": _arch(),
 }
 # symmetries from the task: (kind, order about z, half height for the flip)
 SYMMETRY = {
-    "pillar": ("dihedral", 4, 0.04),
-    "beam": ("dihedral", 2, 0.01),
-    "block": ("dihedral", 2, 0.015),
+    "pillar": ("dihedral", 4, 0.08 / 2),
+    "beam": ("dihedral", 2, 0.02 / 2),
+    "block": ("dihedral", 2, 0.03 / 2),
     "arch": ("cyclic", 2, 0.0),
     "roof": ("cyclic", 2, 0.0),
-    "cylinder": ("revolution", 0, 0.03),
+    "cylinder": ("revolution", 0, 0.06 / 2),
     "lblock": ("identity", 1, 0.0),
 }
 SHAPES = {k: Shape.from_pieces(v) for k, v in PIECES.items()}
@@ -334,7 +343,7 @@ def _room(world, j, G):
 def _takes_grasp(world, after, i, T, movers):
     """Parts of `movers` near pose T that can be picked in `world` but not once part i is at T."""
     _, _, lo, hi = _geometry(world.mesh[i], T)
-    lo, hi = lo - 0.12, hi + 0.12
+    lo, hi = lo - HAND_SPAN, hi + HAND_SPAN
     out = []
     for j in movers:
         if j == i:
@@ -389,7 +398,7 @@ def _hangs_over(world, i, T=None):
         if j == i or _geometry(mesh[j], poses[j])[3][2] < top - 0.002:
             continue
         for lo, hull in _pieces(mesh[j], poses[j]):
-            if lo >= top - 0.002 and _outline_gap(fi, hull) < -0.0003:
+            if lo >= top - 0.002 and _outline_gap(fi, hull) < -SLIVER:
                 out.append(j)
                 break
     return out

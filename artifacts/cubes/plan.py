@@ -24,7 +24,7 @@ back to the geometric order alone. Goals must lie inside the robot's workspace
 import numpy as np
 
 from toolbox import cube_symmetries
-from toolbox.robot import PLACEMENT, WORKSPACE, Hand, Workspace
+from toolbox.robot import JAW_CLEARANCES, PLACEMENT, WORKSPACE, Hand, Workspace
 
 SIDE = 0.04  # cube edge [m]
 HALF = SIDE / 2
@@ -42,6 +42,13 @@ REGION = PLACEMENT  # where cubes are put aside
 GRID = 0.01  # spacing of candidate temporary places [m]
 CLEARANCE = 0.03  # free gap around a temporary place, for the gripper's fingers [m]
 GOAL_CLEARANCE = 0.012  # gap between a temporary place and goals still to build [m]
+# when nothing has that much room: half-way to the open jaws' clearance, and the jaws' narrower
+# clearance to goals (toolbox.robot.JAW_CLEARANCES); then the open jaws only
+FALLBACK_CLEARANCES = (
+    ((CLEARANCE + JAW_CLEARANCES[0]) / 2, JAW_CLEARANCES[1]),
+    (JAW_CLEARANCES[0], 0.0),
+)
+SLIVER = 0.0002  # footprints overlapping deeper than this share a column (not rounding) [m]
 NEAR = 0.2  # cubes farther apart than this never meet the gripper at the other [m]
 
 
@@ -137,7 +144,7 @@ def _snap_goal(goal):
 def _column_free(i, p, current):
     """Nothing but i occupies the column at and above goal pose p."""
     for j, q in current.items():
-        if j != i and q[2] > p[2] - SIDE + 0.002 and _footprint_gap(p, q) < -0.0003:
+        if j != i and q[2] > p[2] - SIDE + 0.002 and _footprint_gap(p, q) < -SLIVER:
             return False  # (the cube comes down vertically: even a sliver overhanging it)
     return True
 
@@ -201,7 +208,7 @@ def _temporary(i, current, pending, hand=None, pickable=()):
     ys = np.arange(REGION.y[0], REGION.y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - here[:2], axis=1), kind="stable")
-    levels = ((CLEARANCE, GOAL_CLEARANCE), (0.015, 0.005), (0.008, 0.0))
+    levels = ((CLEARANCE, GOAL_CLEARANCE), *FALLBACK_CLEARANCES)
     if grip:  # keep goals still to build free for the fingers on every side first
         levels = ((CLEARANCE, CLEARANCE), *levels)
     for clearance, goal_clearance in levels:

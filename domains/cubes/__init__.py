@@ -21,6 +21,7 @@ from domains.generation import retry
 from domains.registry import register
 from geometry import bodies_of, place, yaw_pose
 from geometry import resting_on as supports
+from geometry.tolerances import TOLERANCES
 
 SIDE = 0.04  # cube edge [m]
 PITCH = 0.046  # centre distance of neighbours in rows and pyramid bases: 6 mm gap [m]
@@ -145,7 +146,15 @@ class Cubes(Domain):
             ("support_acyclic", {"kind": "on"}),
         ],
         "plan": [("temporary_places_clear", {"gap": 0.005})],
-        "perceive": [("physically_valid", {"penetration": 0.003, "contact": 0.004})],
+        "perceive": [
+            (
+                "physically_valid",
+                {
+                    "penetration": TOLERANCES.perceived_penetration,
+                    "contact": TOLERANCES.perceived_contact,
+                },
+            )
+        ],
     }
 
     def make_goal(

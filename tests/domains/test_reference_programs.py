@@ -5,8 +5,10 @@ executor's hand model or the generator's placement region."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import domains
@@ -112,3 +114,108 @@ def test_plans_derive_no_region_that_reproduces_the_generators(path):
         if shared:
             derived.append((name, sorted(shared)))
     assert not derived, f"{path}: regions that reproduce the placement region's edges: {derived}"
+
+
+def _lengths_and_angles() -> dict[float, str]:
+    """The executor's, the checks' and the scoring's own lengths [m] and angles (in degrees as
+    a program writes them in `np.radians(...)`), by value → name: what a program can know only
+    when its prompt or the task text states it."""
+    from geometry.tolerances import TOLERANCES
+    from sim.executor import ExecutorConfig
+
+    named: dict[float, str] = {}
+
+    def add(name: str, value, *, angle: bool = False) -> None:
+        for v in _floats(value):
+            if v >= 1e-4:
+                named.setdefault(round(float(np.degrees(v)), 3) if angle else v, name)
+
+    for f in FingerModel.__dataclass_fields__:
+        add(f"FingerModel.{f}", getattr(FingerModel(), f))
+    for f in ("penetration", "contact", "com_margin", "perceived_penetration",
+              "perceived_contact", "sweep_touch", "grasp_margins", "vertical"):  # fmt: skip
+        add(f"TOLERANCES.{f}", getattr(TOLERANCES, f))
+    for f in ("face_vertical", "face_antiparallel", "yaw_only"):
+        add(f"TOLERANCES.{f}", getattr(TOLERANCES, f), angle=True)
+    config = ExecutorConfig()
+    for f in ("final_approach", "clearance", "min_transfer_height", "release_height",
+              "hold_tolerance"):  # fmt: skip
+        add(f"ExecutorConfig.{f}", getattr(config, f))
+    add("ExecutorConfig.in_hand.position", config.in_hand.position)
+    add("ExecutorConfig.in_hand.rotation", config.in_hand.rotation, angle=True)
+    return named
+
+
+HIDDEN = _lengths_and_angles()
+_NUMBER = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s*(mm|cm|m\b|°|deg|rad)?")
+
+
+def _stated(text: str) -> set[float]:
+    """Every number the text states, in the units a program would write it in (metres for
+    lengths, degrees or the bare number otherwise)."""
+    out: set[float] = set()
+    for line in text.splitlines():
+        for number, unit in _NUMBER.findall(line):
+            out |= _as_written(float(number), "mm" if "×" in line else unit)
+    return out
+
+
+def _as_written(v: float, unit: str) -> set[float]:
+    """A stated number as a program may write it (a size table "160 × 35 × 20" is in mm)."""
+    out = {round(v, 6)}
+    if unit == "mm":
+        out.add(round(v / 1000, 6))
+    elif unit == "cm":
+        out.add(round(v / 100, 6))
+    elif unit == "rad":
+        out.add(round(float(np.degrees(v)), 3))
+    return out
+
+
+@pytest.fixture(scope="module")
+def prompts():
+    """Domain → function → the text a model writing that function reads (its first request and
+    the task text)."""
+    from agent.context import build_context
+    from agent.prompt import build_request
+    from toolbox.docs import toolbox_docs
+
+    docs = toolbox_docs()
+    out = {}
+    for name in domains.names():
+        d = domains.load(name)
+        ctx = build_context(d, (), docs)
+        programs = {p.stem: p.read_text() for p in (d.root / "programs").glob("*.py")}
+        order = ("render", "perceive", "relate", "plan")
+        out[name] = {}
+        for k, function in enumerate(order):
+            request = build_request(ctx, function, 1, frozen={f: programs[f] for f in order[:k]})
+            blocks = (*request.system, *request.content)
+            text = "".join(getattr(b, "text", "") for b in blocks)
+            out[name][function] = text + (d.root / "task.md").read_text()
+    return out
+
+
+def test_the_hidden_constants_are_found_and_stated_numbers_read():
+    assert HIDDEN[0.12] in {"ExecutorConfig.min_transfer_height", "FingerModel.palm_from"}
+    assert HIDDEN[0.003] in {"TOLERANCES.perceived_penetration", "FingerModel.tip_margin"}
+    assert {0.025, 0.0003, 0.3} <= set(HIDDEN)  # inner half width, in-hand noise (m and °)
+    assert {0.003, 3.0, 0.04, 0.5, 0.16} <= _stated("3 mm, 3°, 4 cm and 0.5\n| 160 × 35 |")
+
+
+@pytest.mark.parametrize(
+    "path",
+    [p for p in PROGRAMS if p.stem in ("relate", "plan")],
+    ids=lambda p: f"{p.parts[-3]}/{p.name}",
+)
+def test_no_unstated_constant_of_the_executor_or_the_checks_is_in_a_program(path, prompts):
+    """A literal in `relate` or `plan` equal to a length or angle of the executor, the checks
+    or the scoring must be one the program's prompt or task text states: otherwise it was
+    copied (or lands on the hidden value by chance, which a reader cannot tell apart). Derive
+    it from the toolbox's facts or the stated sizes instead. (`perceive`'s numbers are about
+    pixels, colours and search grids: a value threshold of 0.12 is not the palm's height.)"""
+    stated = _stated(prompts[path.parts[-3]][path.stem])
+    copied = [
+        (line, v, HIDDEN[v]) for line, v in _literals(path) if v in HIDDEN and v not in stated
+    ]
+    assert not copied, f"{path}: constants no prompt states: {copied}"

@@ -33,8 +33,9 @@ knob's two axes.
    spread targets, so a graph without `blocks` edges (or a noisy one) still works: edges
    only add to the ordering constraints. When nothing can be placed, a piece lying on a
    pending goal (a start piece in the figure, or a cycle of pieces swapping places) goes to
-   a temporary place first: on the table inside the robot's comfortable reach, 25 mm clear
-   of every piece (room for the fingers) and 12 mm clear of every unbuilt goal.
+   a temporary place first: on the table inside the robot's comfortable reach, an open
+   finger's reach clear of every piece (`JAW_CLEARANCES[0] + FINGER_DEPTH`, 25 mm) and the
+   open jaws' clearance (8 mm) clear of every unbuilt goal; with less room where there is none.
 5. Regrasp. A piece that can be held only one way at its goal (a neighbour's knob takes the
    other axis) and must turn more than 100° is first turned halfway where it lies (or at the
    nearest free place), in the open where both ways work; then the long turn is two short
@@ -44,7 +45,14 @@ knob's two axes.
 import numpy as np
 
 from toolbox.packing import finger_footprints, polygon_gap, spread_footprints
-from toolbox.robot import JAW_CLEARANCES, PLACEMENT, PLACEMENT_SPREAD, WORKSPACE
+from toolbox.robot import (
+    FINGER_DEPTH,
+    FINGER_WIDTH,
+    JAW_CLEARANCES,
+    PLACEMENT,
+    PLACEMENT_SPREAD,
+    WORKSPACE,
+)
 
 SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "large_triangle": 1,
@@ -57,6 +65,12 @@ KNOB_HALF = 0.008  # the 16 mm square knob (the task text) [m]
 # the jaws around a knob with neighbours close by: the smaller approach clearance per side
 OPENING = 2 * KNOB_HALF + 2 * JAW_CLEARANCES[-1]
 FINGER_MARGIN = 0.002  # [m]
+# the farthest another knob's centre can be from this knob's and still touch the open fingers
+# around it: a fingertip's far corner (`toolbox.finger_footprints`) and the knob's half diagonal
+KNOB_REACH = float(
+    np.hypot(OPENING / 2 + FINGER_DEPTH + FINGER_MARGIN, FINGER_WIDTH / 2 + FINGER_MARGIN)
+    + np.sqrt(2) * KNOB_HALF
+)
 UPRIGHT = np.cos(np.radians(5.0))  # |z axis · world z| of a piece lying flat
 ON_TABLE = 0.005  # a goal piece's origin this far from z = 0 is not on the table [m]
 CROWDED = 0.004  # goal pieces overlapping deeper than this cannot both be built [m]
@@ -68,7 +82,16 @@ FREE_GAP = 0.001  # a target this close to a piece not yet at its goal is occupi
 PLACED_GAP = -0.0005  # … to a piece at its goal (spreading could not open everything) [m]
 EASY_TURN = np.radians(70.0)  # a turn the wrist manages with either of two grasps
 REGRASP_TURN = np.radians(100.0)  # longer turns held one way only are split in two
-TEMPORARY = ((0.025, 0.012), (0.015, 0.006), (0.008, 0.002))  # (to pieces, to goals) [m]
+# temporary places (to pieces, to unbuilt goals) [m], roomiest first: an open finger's reach
+# beyond the jaws (JAW_CLEARANCES[0] + FINGER_DEPTH) from pieces and the open jaws' clearance from
+# goals; then half-way, with the jaws' narrower clearance; then the open jaws' clearance and the
+# figure's own gaps
+FINGER_ROOM = JAW_CLEARANCES[0] + FINGER_DEPTH
+TEMPORARY = (
+    (FINGER_ROOM, JAW_CLEARANCES[0]),
+    ((FINGER_ROOM + JAW_CLEARANCES[0]) / 2, JAW_CLEARANCES[1]),
+    (JAW_CLEARANCES[0], SPREAD_GAP),
+)
 GRID = 0.01  # spacing of candidate temporary places [m]
 REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 OUTLINES = {}  # mesh key → bottom outline (k, 2) in the piece's frame [m], counter-clockwise
@@ -132,7 +155,7 @@ def _free_axes(p, others):
     for axis in (0, 1):
         fingers = finger_footprints(p.centre, p.R[:, axis], OPENING, margin=FINGER_MARGIN)
         if all(
-            np.linalg.norm(q.centre - p.centre) > 0.06
+            np.linalg.norm(q.centre - p.centre) > KNOB_REACH
             or all(polygon_gap(f, q.knob)[0] >= 0 for f in fingers)
             for q in others
         ):
@@ -397,8 +420,10 @@ def _in_the_way(pending, target, current, placed):
                 return j
     for i in pending:  # a knob in the way of the fingers at a goal or at a pick
         others = [q for j, q in current.items() if j != i]
-        if not _free_axes(target[i], others) or not _free_axes(current[i], others):
-            for j in pending:
-                if j != i and np.linalg.norm(current[j].centre - target[i].centre) < 0.07:
+        ends = (target[i], current[i])
+        if not all(_free_axes(p, others) for p in ends):
+            for j in pending:  # one whose knob the open fingers there can touch
+                near = min(np.linalg.norm(current[j].centre - p.centre) for p in ends)
+                if j != i and near <= KNOB_REACH:
                     return j
     return None
