@@ -26,8 +26,8 @@ knob's two axes.
    other unplaced piece grippable at its goal afterwards, then the one that costs the pieces
    still to come least. While both of a piece's knob axes are open the gripper can hold it
    four ways instead of two; a piece without symmetry that turns far from pick to place
-   needs them (the FR3's last joint turns ±173°, and one grasp must suit both ends), so
-   taking away such a piece's axis costs, and a piece about to lose its own axis to a later
+   needs them (the wrist turns within `toolbox.robot.WRIST_RANGE`, and one grasp must suit
+   both ends), so taking away such a piece's axis costs, and a piece about to lose its own axis to a later
    neighbour gains by going first. The goal state's `blocks` edges (from `relate`) say which
    placed piece takes away which knob axis; the same test is made from geometry on the
    spread targets, so a graph without `blocks` edges (or a noisy one) still works: edges
@@ -52,6 +52,7 @@ from toolbox.robot import (
     PLACEMENT,
     PLACEMENT_SPREAD,
     WORKSPACE,
+    WRIST_RANGE,
 )
 
 SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
@@ -80,7 +81,10 @@ DONE_YAW = np.radians(2.0)
 SPREAD_GAP, SPREAD_SHIFT = PLACEMENT_SPREAD
 FREE_GAP = 0.001  # a target this close to a piece not yet at its goal is occupied [m]
 PLACED_GAP = -0.0005  # … to a piece at its goal (spreading could not open everything) [m]
-EASY_TURN = np.radians(70.0)  # a turn the wrist manages with either of two grasps
+# a turn the wrist makes with either of two grasps half a turn apart: one of them leaves it
+# within a quarter turn of the middle of WRIST_RANGE, from where it turns WRIST_RANGE[1] - 90°
+# (83°) either way; less, for where the arm's own pose puts the wrist
+EASY_TURN = min(np.radians(70.0), WRIST_RANGE[1] - np.pi / 2)
 REGRASP_TURN = np.radians(100.0)  # longer turns held one way only are split in two
 # temporary places (to pieces, to unbuilt goals) [m], roomiest first: an open finger's reach
 # beyond the jaws (JAW_CLEARANCES[0] + FINGER_DEPTH) from pieces and the open jaws' clearance from
@@ -383,8 +387,8 @@ def plan(start_state, goal_state, meshes):
 def _need(key, goal_yaw, current_yaw):
     """How much a piece needs both knob axes free at its goal, in [0, 1]: with one axis the
     gripper holds it two ways (half a turn apart), and the wrist's range may not cover both
-    the pick and the turn to the place; a turn of up to 70° (modulo the piece's symmetry) is
-    always fine."""
+    the pick and the turn to the place; a turn of up to `EASY_TURN` (modulo the piece's
+    symmetry) is always fine."""
     n = SYMMETRY[key]
     turn = abs(_nearest_yaw(goal_yaw, current_yaw, n) - current_yaw)
     return float(np.clip((turn - EASY_TURN) / (np.pi - EASY_TURN), 0.0, 1.0))

@@ -124,6 +124,16 @@ def test_the_hand_model_stroke_is_the_menagerie_grippers():
     np.testing.assert_allclose(STROKE.tip, measured.tip, atol=5e-5)
 
 
+def test_the_toolbox_states_the_wrist_range_of_the_model():
+    """toolbox.robot.WRIST_RANGE (what the prompts give a program) is the menagerie FR3's last
+    joint, the one the executor and the checks' inverse kinematics turn the held object with."""
+    from toolbox.robot import WRIST_RANGE
+
+    model = robot.build_robot_spec().compile()
+    index = robot.RobotIndex.from_model(model)
+    np.testing.assert_allclose(WRIST_RANGE, index.arm_range[6], atol=1e-6)
+
+
 def test_gripper_stroke_spans_the_stroke():
     table = robot.measure_stroke()
     assert table.gap[0] == pytest.approx(0.085, abs=0.002)
