@@ -12,6 +12,7 @@ pooled; sim/reliability.py). Trials come from the fixed benchmark set
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from contracts.errors import UsageError, user_input
@@ -55,7 +56,8 @@ def _instances(domain, args: argparse.Namespace) -> list[dict]:
         from sim.settle import physical_problems
 
         return [
-            domain.generate(args.seed + k, physics=physical_problems).to_dict() for k in range(n)
+            domain.generate(args.seed + k, physics=physical_problems, split=args.split).to_dict()
+            for k in range(n)
         ]
     bench = domain.benchmark(split=args.split)
     # start-major order, so that a short run still covers many goals
@@ -98,11 +100,13 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
     policy = _policy(args.policy)
     set_hash = None
     if policy[0] == "artifacts":
-        from artifacts import verify
+        from artifacts import unchecked_note, verify
 
         # fail fast, exit 1 naming the file
         manifest, _ = verify(domain_name, Path(policy[1]) if policy[1] else None)
         set_hash = manifest["set_hash"]
+        if note := unchecked_note(domain_name, manifest):
+            print(note, file=sys.stderr)
     instances = _instances(domain, args)
     config = EvalConfig(
         domain=domain_name,
@@ -149,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
         write_json(out, Path(args.json))
     if (
         _policy(args.policy)[0] == "artifacts"
-        and not args.seed
+        and args.seed is None
         and not args.instances
         and not args.trials
         and args.split == "dev"
@@ -218,7 +222,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--seed",
         type=int,
         default=None,
-        help="a fresh generated set from seed S instead of the benchmark",
+        help="a fresh generated set of --split's goal and start families from seeds S, S+1, … "
+        "instead of the benchmark",
     )
     p.add_argument(
         "--instances",

@@ -53,10 +53,13 @@ def generate(args: argparse.Namespace) -> int:
     domain = domains.load(args.domain)
     from sim.settle import physical_problems
 
-    inst = domain.generate(args.seed, physics=physical_problems)
+    inst = domain.generate(args.seed, physics=physical_problems, split=args.split)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(dumps(inst.to_dict()))
-    print(f"{args.out}: {domain.name} seed {args.seed}, {len(inst.order)} construction steps")
+    print(
+        f"{args.out}: {domain.name} {args.split} seed {args.seed}, "
+        f"{len(inst.order)} construction steps"
+    )
     return 0
 
 
@@ -216,6 +219,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = scene_sub.add_parser("generate", help="draw an instance (start, goal, construction order)")
     g.add_argument("domain", metavar="DOMAIN")
     g.add_argument("--seed", type=int, required=True)
+    g.add_argument(
+        "--split",
+        choices=("dev", "test"),
+        default="dev",
+        help="draw from the dev or the test split's goal and start families (default: dev)",
+    )
     g.add_argument("--out", type=Path, required=True, metavar="INSTANCE.json")
     g.set_defaults(handler=generate)
 

@@ -45,6 +45,25 @@ def test_render_a_hand_written_instance(name, tmp_path, capsys):
         assert (obs["depth"] > 0).mean() > 0.9
 
 
+def test_generate_draws_from_the_split_asked_for(tmp_path):
+    import domains
+    from domains.benchmark import dumps
+    from sim.settle import physical_problems
+
+    for split, name in (("dev", "seed4"), ("test", "test/seed4")):
+        inst = tmp_path / f"{split}.json"
+        assert (
+            main(
+                ["scene", "generate", "cubes", "--seed", "4", "--split", split, "--out", str(inst)]
+            )
+            == 0
+        )
+        drawn = json.loads(inst.read_text())
+        expected = domains.load("cubes").generate(4, physics=physical_problems, split=split)
+        assert drawn["name"] == name
+        assert drawn == json.loads(dumps(expected.to_dict()))
+
+
 def test_generate_then_render_and_show(tmp_path):
     inst = tmp_path / "i.json"
     assert main(["scene", "generate", "cubes", "--seed", "4", "--out", str(inst)]) == 0
