@@ -7,7 +7,7 @@ The runtime imports neither the model SDK nor the simulator.
 
 from artifacts.errors import ArtifactError, ObservationError, ProgramFailed
 from artifacts.runtime import Runner, System, from_folder, load
-from artifacts.store import build_manifest, freeze, verify
+from artifacts.store import build_manifest, freeze, unchecked_note, verify
 
 __all__ = [
     "ArtifactError",
@@ -19,5 +19,6 @@ __all__ = [
     "freeze",
     "from_folder",
     "load",
+    "unchecked_note",
     "verify",
 ]

@@ -21,7 +21,15 @@ from pathlib import Path
 from typing import Any
 
 from artifacts.errors import ArtifactError
-from artifacts.hashing import REPO, set_hash, sha256_bytes, sha256_text, tree_hash
+from artifacts.hashing import (
+    CHECKED_AGAINST,
+    REPO,
+    changed_since_checked,
+    checked_against,
+    set_hash,
+    sha256_bytes,
+    sha256_text,
+)
 from contracts import ContractError, validate
 from contracts.functions import FUNCTIONS, dependencies
 
@@ -63,8 +71,7 @@ def build_manifest(
         "set_hash": set_hash({n: e["sha256"] for n, e in functions.items()}),
         "functions": functions,
         "author": author,
-        "contracts_hash": tree_hash("contracts"),
-        "toolbox_hash": tree_hash("toolbox"),
+        **checked_against(),
         "created_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     if prompt_hash:
@@ -76,15 +83,20 @@ def build_manifest(
 def freeze(
     domain: str, sources: dict[str, str], manifest: dict[str, Any], root: Path | None = None
 ) -> bool:
-    """Write the set atomically; return False (writing nothing) when the set hash is unchanged."""
+    """Write the set atomically; return False (writing nothing) when the set hash is unchanged
+    and it was checked against the same contracts and toolbox. The same set checked again
+    against a changed toolbox gets the new manifest (and keeps its `eval.json`)."""
     target = domain_dir(domain, root)
     current = target / "manifest.json"
     if current.is_file():
         try:
-            if json.loads(current.read_text()).get("set_hash") == manifest["set_hash"]:
-                return False
+            old = json.loads(current.read_text())
         except json.JSONDecodeError:
-            pass
+            old = {}
+        if isinstance(old, dict) and all(
+            old.get(k) == manifest[k] for k in ("set_hash", *CHECKED_AGAINST)
+        ):
+            return False
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{domain}.new-"))
     try:
@@ -181,3 +193,17 @@ def verify(domain: str, root: Path | None = None) -> tuple[dict[str, Any], dict[
     if expected != manifest["set_hash"]:
         raise ArtifactError(f"{path}: set_hash does not match the functions' hashes")
     return manifest, sources
+
+
+def unchecked_note(domain: str, manifest: dict[str, Any]) -> str | None:
+    """A line for the user when the set's checks ran against other contracts or toolbox
+    sources than this checkout's (None: they ran against these)."""
+    trees = changed_since_checked(manifest)
+    if not trees:
+        return None
+    return (
+        f"note: artifacts/{domain} passed its checks against other sources of {'; '.join(trees)} "
+        "than this checkout's; its programs run as frozen. Re-run their checks with "
+        f"`pytest --rivet-artifacts artifacts/ -k 'manifest and {domain}'`; "
+        f"`rivet author {domain}` re-stamps the set once they pass"
+    )

@@ -175,6 +175,7 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
     from agent.prompt import templates_hash
     from agent.report import summary, write_report
     from artifacts import build_manifest, freeze
+    from artifacts.store import domain_dir, eval_set_hash
 
     # One ledger for the whole invocation: --runs N shares it, --resume starts from the
     # spending its journal holds.
@@ -240,10 +241,14 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
                 attempts={f: s["attempts"] for f, s in per_fn.items()},
                 checks={f: s["checks"] for f, s in per_fn.items()},
             )
-            changed = freeze(
-                domain.name, frozen, manifest, Path(args.artifacts) if args.artifacts else None
-            )
-            state = "written" if changed else "unchanged"
+            root = Path(args.artifacts) if args.artifacts else None
+            # the set hash a manifest is stamped with, read as eval.json's is
+            before = eval_set_hash(domain_dir(domain.name, root) / "manifest.json")
+            state = "unchanged"
+            if freeze(domain.name, frozen, manifest, root):
+                state = "written"
+                if before == manifest["set_hash"]:
+                    state = "re-stamped (the same programs, checked against the current toolbox)"
             print(f"artifacts/{domain.name}: {state}, set hash {manifest['set_hash']}")
             print(f"report: {report}")
     finally:

@@ -19,7 +19,7 @@ from rivet.commands._options import add_sandbox_option
 def run(args: argparse.Namespace) -> int:
     import domains
     import sandbox
-    from artifacts import load
+    from artifacts import load, unchecked_note
     from artifacts.errors import ProgramFailed
     from artifacts.observations import read_observation
     from contracts import ContractError, to_jsonable, validate
@@ -28,6 +28,8 @@ def run(args: argparse.Namespace) -> int:
     start = read_observation(args.start)
     goal = read_observation(args.goal)
     system = load(domain.name, Path(args.artifacts) if args.artifacts else None)
+    if note := unchecked_note(domain.name, system.manifest):
+        print(note, file=sys.stderr)
     options = {"quiet": True} if args.sandbox == "local" else {}
     with sandbox.open_executor(args.sandbox, **options) as executor, system.runner(executor) as run:
         plan = run.solve(start, goal)

@@ -20,6 +20,7 @@ from agent.context import build_context, reference_observations
 from agent.extract import extract_draft
 from agent.prompt import build_request
 from agent.transcript import Transcript
+from artifacts.hashing import CHECKED_AGAINST
 from contracts.functions import FUNCTIONS
 from toolbox.docs import toolbox_docs
 
@@ -57,6 +58,8 @@ def test_replayed_authoring_reproduces_the_committed_artifacts(tmp_path, domain)
     assert proc.returncode == 0, proc.stderr[-3000:]
     fresh = json.loads((tmp_path / "art" / domain / "manifest.json").read_text())
     assert fresh["set_hash"] == committed["set_hash"]
+    # … and the committed manifest names what these checks just passed against
+    assert [fresh[k] for k in CHECKED_AGAINST] == [committed[k] for k in CHECKED_AGAINST]
     assert fresh["author"]["kind"] == "people"  # hand-written, and labelled so
     assert any(f.get("attempts", 1) > 1 for f in fresh["functions"].values()), "no repair exercised"
     assert "failed:" in proc.stderr  # a draft was rejected by the checks, then repaired

@@ -8,7 +8,10 @@ import sys
 
 import pytest
 
-from artifacts import ArtifactError, build_manifest, freeze, load, verify
+from artifacts import ArtifactError, build_manifest, freeze, load, unchecked_note, verify
+from artifacts.hashing import REPO, checked_against
+
+ARTIFACTS = REPO / "artifacts"
 
 SOURCES = {
     "render": "def render(records, meshes, camera):\n    return {'n': len(records)}\n",
@@ -128,3 +131,32 @@ def test_runtime_imports_neither_the_model_sdk_nor_docker(root):
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout.replace("'", '"')) == []
+
+
+def test_the_same_set_checked_against_a_changed_toolbox_is_restamped(root):
+    """A manifest says what its set passed its checks against; the same programs checked
+    again against a changed toolbox get the new stamp and keep their evaluation."""
+    path = root / "toy" / "manifest.json"
+    old = json.loads(path.read_text())
+    old["toolbox_hash"] = "0" * 64  # checked against some earlier toolbox
+    path.write_text(json.dumps(old))
+    (root / "toy" / "eval.json").write_text(json.dumps({"set_hash": old["set_hash"]}))
+    assert "toolbox/ and geometry/" in (unchecked_note("toy", old) or "")
+
+    fresh = build_manifest("toy", SOURCES, author=AUTHOR)
+    assert fresh["set_hash"] == old["set_hash"]
+    assert freeze("toy", SOURCES, fresh, root)
+    manifest, _ = verify("toy", root)
+    assert manifest["toolbox_hash"] == checked_against()["toolbox_hash"] != "0" * 64
+    assert unchecked_note("toy", manifest) is None
+    assert json.loads((root / "toy" / "eval.json").read_text())["set_hash"] == old["set_hash"]
+
+
+@pytest.mark.parametrize("domain", sorted(p.parent.name for p in ARTIFACTS.glob("*/manifest.json")))
+def test_committed_sets_were_checked_against_this_checkout(domain):
+    """The committed manifests name the contracts and toolbox of this checkout: a change to
+    either is followed by re-running the sets' checks (`rivet author D` replays them and
+    re-stamps the set), so no frozen set claims checks it never passed."""
+    manifest, _ = verify(domain)
+    note = unchecked_note(domain, manifest)
+    assert note is None, f"{note}\n(re-stamp: rivet author {domain} --strict)"
