@@ -48,6 +48,9 @@ SAME_ANGLE = np.radians(4.0)
 TILT = np.radians(20.0)  # a goal orientation farther than this from every resting pose
 GOAL_OVERLAP = 0.003  # goal parts may interpenetrate this much (perception noise) [m]
 TOUCH = 0.001  # a placement may touch others this deep [m]
+# perceived states hold parts up to 3 mm into one another (the domain facts): a part still to
+# move that comes this near a place may in truth stand in it [m]
+PERCEIVED_OVERLAP = GOAL_OVERLAP
 # temporary places keep this far inside the robot's workspace, where the arm is comfortable [m]
 REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 GRID = 0.01  # spacing of candidate temporary places [m]
@@ -465,9 +468,10 @@ def _gaps(hull, others, shifts):
     return out
 
 
-def _temporary(world, i, pending, keep=(), poor_place=None):
+def _temporary(world, i, pending, keep=(), poor_place=None, accept=None):
     """A free place on the table for part i (same orientation), nearest to where it is, with
-    room for the fingers around it seen from above (nothing overhangs it either)."""
+    room for the fingers around it seen from above (nothing overhangs it either), which
+    `accept` (when given) accepts: e.g. one the gripper can carry it to."""
     mesh = world.mesh[i]
     T0 = world.poses[i].copy()
     T0[2, 3] -= _lowest(mesh, T0)
@@ -495,14 +499,16 @@ def _temporary(world, i, pending, keep=(), poor_place=None):
     for clearance, goal_clearance in CLEARANCES:
         ok = inside & moved & (to_parts >= clearance) & (to_goals >= goal_clearance)
         ok &= to_keep >= max(goal_clearance, FINGER_ROOM if clearance >= CLEARANCES[0][0] else 0)
-        if ok.any():
-            first = None
-            for k in np.flatnonzero(ok)[:SLOT_TRIES]:  # rather where it does no harm
-                T = T0.copy()
-                T[:2, 3] = cand[k]
-                if poor_place is None or not poor_place(i, T):
-                    return T
-                first = T if first is None else first
+        first = None
+        for k in np.flatnonzero(ok)[:SLOT_TRIES]:  # rather where it does no harm
+            T = T0.copy()
+            T[:2, 3] = cand[k]
+            if accept is not None and not accept(T):
+                continue
+            if poor_place is None or not poor_place(i, T):
+                return T
+            first = T if first is None else first
+        if first is not None:
             return first
     return None
 
@@ -610,6 +616,8 @@ def _build(start, goal, target, goal_sup, mesh, hand, grip):
             T = _reachable(mesh[i], world.poses[i], target[i])
             if T is None or world.hits(i, T):
                 continue
+            if world.hits(i, T, clearance=PERCEIVED_OVERLAP, skip=final):
+                continue  # a part still to move may in truth stand in its place
             after = world.moved(i, T)
             if any(i in s for s in after.sup.values()) or not after.stands():
                 continue  # it would slide under a part, or leave something tipping
@@ -628,7 +636,7 @@ def _build(start, goal, target, goal_sup, mesh, hand, grip):
                 if blockers:
                     for j in blockers:
                         if not is_done(j):
-                            in_the_way.append((j, [world.poses[i], T], mesh[i]))
+                            in_the_way.append((j, i, T))
                     continue
                 if slot_taken(i, T):  # another goal place would lose its room: later
                     deferred = deferred or (i, T)
@@ -651,8 +659,11 @@ def _build(start, goal, target, goal_sup, mesh, hand, grip):
 def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip, poor_place):
     """A move of one blocking part to a temporary place, or the reason there is none."""
     keep = {}  # part → outlines it must stay clear of: where the fingers must go
-    for j, poses, m in in_the_way:
-        keep.setdefault(_top_of(world, j), []).extend(_footprint(m, T) for T in poses)
+    room_for = {}  # part → the moves (i, T) whose fingers it is in the way of
+    for j, i, T in in_the_way:
+        top = _top_of(world, j)
+        keep.setdefault(top, []).extend(_footprint(mesh[i], U) for U in (world.poses[i], T))
+        room_for.setdefault(top, []).append((i, T))
     candidates = list(keep)
     for i in ready:  # what stands on, over or in the way of a part that could be placed
         if i in world.loaded() or _hangs_over(world, i):
@@ -664,8 +675,14 @@ def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, gr
         for j in sorted(world.poses, key=lambda j: (-_lowest(mesh[j], world.poses[j]), j)):
             if j == i:
                 continue
-            gap, _ = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], world.poses[j], cutoff=0.002)
-            if gap < -TOUCH or (not is_done(j) and i in _hangs_over(after, j)):
+            gap, _ = separation(
+                SHAPES[mesh[i]], T, SHAPES[mesh[j]], world.poses[j], cutoff=2 * PERCEIVED_OVERLAP
+            )
+            if is_done(j):
+                blocks = gap < -TOUCH
+            else:  # perceived apart from i's goal, so it may in truth stand in it
+                blocks = gap < PERCEIVED_OVERLAP or i in _hangs_over(after, j)
+            if blocks:
                 candidates.append(_top_of(world, j))
     # a stack in the wrong order: the highest part that is not final and can be lifted
     loaded = world.loaded()
@@ -678,11 +695,23 @@ def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, gr
             continue
         seen.append(b)
         pending = [(i, target[i]) for i in sorted(target) if not is_done(i) and i != b]
-        T = _temporary(world, b, pending, keep.get(b, []), poor_place if grip else None)
-        if T is None:
-            continue
-        after = world.moved(b, T)
-        if after.stands() and not (grip and _move_blockers(world, b, T, after) is not None):
+
+        def carried(T, b=b):
+            """Part b put down at T leaves every part standing, and (`grip`) one grasp has
+            room for the fingers at both ends, and b is out of the way of the fingers it was
+            moved for."""
+            after = world.moved(b, T)
+            if not after.stands():
+                return False
+            if grip and _move_blockers(world, b, T, after) is not None:
+                return False
+            return not any(
+                b in (_move_blockers(after, i, U, after.moved(i, U)) or ())
+                for i, U in room_for.get(b, ())
+            )
+
+        T = _temporary(world, b, pending, keep.get(b, []), poor_place if grip else None, carried)
+        if T is not None:
             return (b, T)
     if not seen:
         return "no part can be moved"
