@@ -50,8 +50,10 @@ def test_a_fresh_seed_draws_from_the_split_asked_for(tmp_path):
     eval_json = REPO / "artifacts" / "cubes" / "eval.json"
     before = eval_json.read_bytes() if eval_json.is_file() else None
     proc = subprocess.run(
-        [RIVET, "eval", "cubes", "--policy", "oracle", "--split", "test", "--seed", "0"]
-        + ["--trials", "1", "--quiet", "--json", str(out)],
+        [
+            *(RIVET, "eval", "cubes", "--policy", "oracle", "--split", "test", "--seed", "0"),
+            *("--trials", "1", "--quiet", "--json", str(out)),
+        ],
         capture_output=True,
         text=True,
         timeout=600,
