@@ -128,8 +128,9 @@ def freeze(
     return True
 
 
-def eval_set_hash(path: Path) -> str | None:
-    """The set hash an eval.json says it measured (None: no file, unreadable, or unstamped)."""
+def stamped_set_hash(path: Path) -> str | None:
+    """The `set_hash` a JSON file of a set stamps: the set an eval.json measured, or the one a
+    manifest froze (None: no file, unreadable, or unstamped)."""
     try:
         value = json.loads(path.read_text()).get("set_hash")
     except (OSError, json.JSONDecodeError, AttributeError):
@@ -141,10 +142,14 @@ def _carry_eval(old: Path, new: Path, set_hash: str) -> None:
     """Into the new set's folder: as `eval.json` only metrics that measured `set_hash`; the
     latest metrics of another set as `eval.stale.json`."""
     current, stale = old / EVAL, old / STALE_EVAL
-    if stale.is_file() and eval_set_hash(stale) == set_hash and eval_set_hash(current) != set_hash:
+    if (
+        stale.is_file()
+        and stamped_set_hash(stale) == set_hash
+        and stamped_set_hash(current) != set_hash
+    ):
         current, stale = stale, current  # freezing again a set measured before: restore it
     if current.is_file():
-        if eval_set_hash(current) == set_hash:
+        if stamped_set_hash(current) == set_hash:
             shutil.copy2(current, new / EVAL)
             if stale.is_file():
                 shutil.copy2(stale, new / STALE_EVAL)

@@ -58,6 +58,7 @@ from toolbox.render import compare_renders, overlay_mask, render_scene
 from toolbox.robot import (
     FINGER_DEPTH,
     FINGER_WIDTH,
+    GRASP_MARGINS,
     JAW_CLEARANCES,
     MAX_GRASP_WIDTH,
     MAX_OPENING,
@@ -84,6 +85,11 @@ from toolbox.segmentation import (
     segment_hue,
 )
 from toolbox.stability import (
+    COM_MARGIN,
+    PERCEIVED_GAP,
+    PERCEIVED_OVERLAP,
+    RESTING_GAP,
+    TOUCHING,
     RestingPose,
     Shape,
     collisions,
@@ -107,13 +113,19 @@ from toolbox.vision import (
 )
 
 __all__ = [
+    "COM_MARGIN",
     "FINGER_DEPTH",
     "FINGER_WIDTH",
+    "GRASP_MARGINS",
     "JAW_CLEARANCES",
     "MAX_GRASP_WIDTH",
     "MAX_OPENING",
+    "PERCEIVED_GAP",
+    "PERCEIVED_OVERLAP",
     "PLACEMENT",
     "PLACEMENT_SPREAD",
+    "RESTING_GAP",
+    "TOUCHING",
     "WORKSPACE",
     "WRIST_RANGE",
     "Grasp",

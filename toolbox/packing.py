@@ -15,7 +15,7 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, QhullError
 
 from toolbox.errors import ToolboxError
-from toolbox.robot import FINGER_DEPTH, FINGER_WIDTH
+from toolbox.robot import FINGER_DEPTH, FINGER_WIDTH, GRASP_MARGINS
 
 __all__ = ["finger_footprints", "footprint", "polygon_gap", "spread_footprints"]
 
@@ -163,7 +163,7 @@ def finger_footprints(
     *,
     finger_depth: float = FINGER_DEPTH,
     finger_width: float = FINGER_WIDTH,
-    margin: float = 0.002,
+    margin: float = GRASP_MARGINS[-1],
 ) -> list[np.ndarray]:
     """Footprints (two (4, 2) rectangles [m]) of a parallel gripper's open fingers, from above.
 
@@ -174,7 +174,8 @@ def finger_footprints(
         finger_depth, finger_width: each finger's extent outwards from its pad face and
             across the closing direction; the defaults are the 2F-85's
             (`toolbox.robot.FINGER_DEPTH`, `FINGER_WIDTH`).
-        margin: clearance added on every side [m].
+        margin: clearance added on every side [m]; the default is the least the executor
+            keeps (`toolbox.robot.GRASP_MARGINS`).
     Whatever overlaps a rectangle at the fingers' height (`polygon_gap(...) < 0`) is in the
     way of that grasp; try the other closing direction (a square knob has two).
     """

@@ -26,7 +26,8 @@ checks add an IK test). `MAX_OPENING` is the widest the jaws open; for the appro
 release they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or
 `JAW_CLEARANCES[1]` when a neighbour is too close for that (`toolbox.finger_footprints` draws
 the open fingers from above for such an opening; each fingertip reaches `FINGER_DEPTH` outwards
-from its pad and is `FINGER_WIDTH` wide). The held object turns with the arm's last joint,
+from its pad and is `FINGER_WIDTH` wide), and the hand keeps `GRASP_MARGINS[0]` from every
+neighbour, or `GRASP_MARGINS[1]` where no grasp has that much room. The held object turns with the arm's last joint,
 whose range is `WRIST_RANGE` (the FR3's ±172.8°): between the pick and the place the wrist turns
 by the object's turn, so a grasp that leaves the wrist near one end of its range cannot make a
 long turn that way; a grasp half a turn from it may. Records are ``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
@@ -50,11 +51,13 @@ from geometry import (
     Workspace,
 )
 from geometry.hand import MAX_GRASP_WIDTH, FingerModel, Grasp, MoveCheck, Obstacle, plan_grasps
+from geometry.tolerances import TOLERANCES
 from toolbox.errors import ToolboxError
 
 __all__ = [
     "FINGER_DEPTH",
     "FINGER_WIDTH",
+    "GRASP_MARGINS",
     "JAW_CLEARANCES",
     "MAX_GRASP_WIDTH",
     "MAX_OPENING",
@@ -74,6 +77,7 @@ JAW_CLEARANCES = FingerModel().clearances  # [m] per side, beyond the gripped wi
 # [m] a fingertip's extent outwards from its pad face, and across the closing direction
 FINGER_DEPTH = FingerModel().segments[0][2]
 FINGER_WIDTH = 2 * FingerModel().segments[0][3]
+GRASP_MARGINS = TOLERANCES.grasp_margins  # [m] gripper to neighbours, larger preferred
 WRIST_RANGE = (-3.0159, 3.0159)  # [rad] the FR3's last joint (the flange about the tool axis)
 
 

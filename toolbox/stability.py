@@ -15,8 +15,12 @@ penetration and for the face-to-face contacts of resting parts. The table is the
 ("table"). Uniform density. Records are `{"id", "mesh", "pose"}` with `pose` =
 `T_world_object` (4, 4) [m]; `shapes` maps mesh keys to `Shape`s.
 
-Default tolerances: interpenetration up to 1 mm counts as touching; a gap up to 2 mm counts as
-resting on; a centre of mass (with its load) may lie 0.5 mm outside its support.
+Default tolerances (the checks and the scoring judge with them): interpenetration up to
+`TOUCHING` counts as touching; a gap up to `RESTING_GAP` counts as resting on; a centre of mass
+(with its load) may lie `COM_MARGIN` outside its support. Perceived states (`perceive`'s
+output, which `relate` and `plan` receive) are accepted with more slack, since every perceived
+pose carries some error: objects up to `PERCEIVED_OVERLAP` into one another and up to
+`PERCEIVED_GAP` above what holds them up; read overlaps and contacts in them with that slack.
 """
 
 from __future__ import annotations
@@ -27,9 +31,15 @@ from typing import Any, TypeVar
 
 import geometry
 from geometry import DegenerateError, RestingPose, UnknownShape
+from geometry.tolerances import TOLERANCES
 from toolbox.errors import ToolboxError
 
 __all__ = [
+    "COM_MARGIN",
+    "PERCEIVED_GAP",
+    "PERCEIVED_OVERLAP",
+    "RESTING_GAP",
+    "TOUCHING",
     "RestingPose",
     "Shape",
     "collisions",
@@ -38,6 +48,12 @@ __all__ = [
     "supports",
     "unstable_objects",
 ]
+
+TOUCHING = TOLERANCES.penetration  # [m] deepest interpenetration still counted as touching
+RESTING_GAP = TOLERANCES.contact  # [m] largest gap still counted as resting on
+COM_MARGIN = TOLERANCES.com_margin  # [m] a centre of mass this far outside its support is held
+PERCEIVED_OVERLAP = TOLERANCES.perceived_penetration  # [m] … between perceived objects
+PERCEIVED_GAP = TOLERANCES.perceived_contact  # [m] … under a perceived object
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 

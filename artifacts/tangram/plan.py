@@ -48,12 +48,14 @@ from toolbox.packing import finger_footprints, polygon_gap, spread_footprints
 from toolbox.robot import (
     FINGER_DEPTH,
     FINGER_WIDTH,
+    GRASP_MARGINS,
     JAW_CLEARANCES,
     PLACEMENT,
     PLACEMENT_SPREAD,
     WORKSPACE,
     WRIST_RANGE,
 )
+from toolbox.stability import PERCEIVED_OVERLAP, TOUCHING
 
 SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "large_triangle": 1,
@@ -65,7 +67,7 @@ SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
 KNOB_HALF = 0.008  # the 16 mm square knob (the task text) [m]
 # the jaws around a knob with neighbours close by: the smaller approach clearance per side
 OPENING = 2 * KNOB_HALF + 2 * JAW_CLEARANCES[-1]
-FINGER_MARGIN = 0.002  # [m]
+FINGER_MARGIN = GRASP_MARGINS[-1]  # the least clearance the hand keeps around its fingers [m]
 # the farthest another knob's centre can be from this knob's and still touch the open fingers
 # around it: a fingertip's far corner (`toolbox.finger_footprints`) and the knob's half diagonal
 KNOB_REACH = float(
@@ -74,13 +76,16 @@ KNOB_REACH = float(
 )
 UPRIGHT = np.cos(np.radians(5.0))  # |z axis · world z| of a piece lying flat
 ON_TABLE = 0.005  # a goal piece's origin this far from z = 0 is not on the table [m]
-CROWDED = 0.004  # goal pieces overlapping deeper than this cannot both be built [m]
+# goal pieces overlapping deeper than the perceived states' slack (and a touch) cannot both be
+# built [m]
+CROWDED = PERCEIVED_OVERLAP + TOUCHING
 DONE_POS = 0.002  # a piece this close to its goal stays where it is [m]
 DONE_YAW = np.radians(2.0)
 # gaps opened between goal pieces, moving no piece more than this (the executor can hit it) [m]
 SPREAD_GAP, SPREAD_SHIFT = PLACEMENT_SPREAD
-FREE_GAP = 0.001  # a target this close to a piece not yet at its goal is occupied [m]
-PLACED_GAP = -0.0005  # … to a piece at its goal (spreading could not open everything) [m]
+EDGE_GAP = 0.0005  # the figure's pieces lie this far apart, edge to edge (the task text) [m]
+FREE_GAP = TOUCHING  # a target this close to a piece not yet at its goal is occupied [m]
+PLACED_GAP = -EDGE_GAP  # … to a piece at its goal (spreading could not open everything) [m]
 # a turn the wrist makes with either of two grasps half a turn apart: one of them leaves it
 # within a quarter turn of the middle of WRIST_RANGE, from where it turns WRIST_RANGE[1] - 90°
 # (83°) either way; less, for where the arm's own pose puts the wrist

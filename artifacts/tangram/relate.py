@@ -25,6 +25,7 @@ import networkx as nx
 import numpy as np
 
 from toolbox.packing import finger_footprints, footprint, polygon_gap
+from toolbox.robot import GRASP_MARGINS, JAW_CLEARANCES
 
 RELATIONS = {
     "adjacent": "the two pieces' footprints are at most 8 mm apart (edge to edge or corner to "
@@ -38,8 +39,10 @@ RELATIONS = {
 ADJACENT_GAP = 0.008  # [m]
 ON_GAP = 0.005  # [m]
 KNOB_FROM = 0.016  # the knob is what stands above this height [m]
-OPENING = 0.024  # jaw opening around the knob for the approach [m]
-FINGER_MARGIN = 0.002  # clearance kept around the fingers [m]
+KNOB = 0.016  # the knob's side (the task text) [m]
+# jaw opening around the knob for the approach, the jaws' narrower clearance on each side [m]
+OPENING = KNOB + 2 * JAW_CLEARANCES[-1]
+FINGER_MARGIN = GRASP_MARGINS[-1]  # the least clearance the hand keeps around its fingers [m]
 
 
 def _heights(mesh, pose):

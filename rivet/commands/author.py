@@ -175,7 +175,7 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
     from agent.prompt import templates_hash
     from agent.report import summary, write_report
     from artifacts import build_manifest, freeze
-    from artifacts.store import domain_dir, eval_set_hash
+    from artifacts.store import domain_dir, stamped_set_hash
 
     # One ledger for the whole invocation: --runs N shares it, --resume starts from the
     # spending its journal holds.
@@ -243,7 +243,7 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
             )
             root = Path(args.artifacts) if args.artifacts else None
             # the set hash a manifest is stamped with, read as eval.json's is
-            before = eval_set_hash(domain_dir(domain.name, root) / "manifest.json")
+            before = stamped_set_hash(domain_dir(domain.name, root) / "manifest.json")
             state = "unchanged"
             if freeze(domain.name, frozen, manifest, root):
                 state = "written"

@@ -152,11 +152,18 @@ _NUMBER = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s*(mm|cm|m\b|°|deg|rad)?")
 
 def _stated(text: str) -> set[float]:
     """Every number the text states, in the units a program would write it in (metres for
-    lengths, degrees or the bare number otherwise)."""
+    lengths, degrees or the bare number otherwise). The toolbox documentation's headings
+    (a constant's `TOUCHING = 0.001`, a signature's defaults) do not count: a value the prompt gives
+    only by a toolbox name is one a program takes by that name, so a reader can see where it
+    comes from."""
     out: set[float] = set()
     for line in text.splitlines():
+        if line.startswith("###"):
+            continue
         for number, unit in _NUMBER.findall(line):
-            out |= _as_written(float(number), "mm" if "×" in line else unit)
+            out |= _as_written(
+                float(number), "mm" if line.startswith("|") and "×" in line else unit
+            )
     return out
 
 
@@ -219,3 +226,76 @@ def test_no_unstated_constant_of_the_executor_or_the_checks_is_in_a_program(path
         (line, v, HIDDEN[v]) for line, v in _literals(path) if v in HIDDEN and v not in stated
     ]
     assert not copied, f"{path}: constants no prompt states: {copied}"
+
+
+def _toolbox_named() -> dict[float, str]:
+    """The lengths the toolbox documents by name (its tolerances and the hand's sizes)."""
+    import toolbox.robot
+    import toolbox.stability
+
+    named: dict[float, str] = {}
+    for module in (toolbox.stability, toolbox.robot):
+        for name in module.__all__:
+            for v in _floats(getattr(module, name)):
+                named.setdefault(v, f"{module.__name__}.{name}")
+    return named
+
+
+TOOLBOX_NAMED = _toolbox_named()
+# A module constant of a reference program whose number is a toolbox tolerance's by chance: what
+# it means instead.
+NOT_THE_TOOLBOX_FACT = {
+    ("assembly", "relate", "ABOVE"): "a height band for `blocks` (outlines seen from above)",
+    ("assembly", "relate", "OVERLAP"): "the least overlap of outlines that makes a `blocks` edge",
+    ("tangram", "plan", "DONE_POS"): "how near its goal a piece is left where it lies",
+}
+
+
+def _module_constants(path: Path) -> list[tuple[int, str, float]]:
+    """(line, name, |value|) of each module-level `NAME = <number>`."""
+    out = []
+    for node in ast.parse(path.read_text()).body:
+        if not (isinstance(node, ast.Assign) and len(node.targets) == 1):
+            continue
+        target, value = node.targets[0], node.value
+        if isinstance(value, ast.UnaryOp) and isinstance(value.op, ast.USub):
+            value = value.operand
+        if (
+            isinstance(target, ast.Name)
+            and isinstance(value, ast.Constant)
+            and isinstance(value.value, float)
+        ):
+            out.append((node.lineno, target.id, round(abs(value.value), 6)))
+    return out
+
+
+def test_the_toolbox_names_are_read():
+    assert TOOLBOX_NAMED[0.001] == "toolbox.stability.TOUCHING"
+    assert TOOLBOX_NAMED[0.003] == "toolbox.stability.PERCEIVED_OVERLAP"
+    assert "toolbox.robot.GRASP_MARGINS" in TOOLBOX_NAMED.values()
+
+
+@pytest.mark.parametrize(
+    "path",
+    [p for p in PROGRAMS if p.stem in ("relate", "plan")],
+    ids=lambda p: f"{p.parts[-3]}/{p.name}",
+)
+def test_a_tolerance_the_toolbox_names_is_taken_by_its_name(path):
+    """A program's named constant that equals a tolerance or hand size the toolbox documents by
+    name (`toolbox.stability.TOUCHING`, `toolbox.robot.GRASP_MARGINS` …) is that fact: it is
+    written as the name, so a reader sees where it comes from (the prompt may also state the
+    number in prose, which is how a copied constant used to pass). A constant that only shares
+    the number is one of the domain's own (its task text, its relation gaps) or is listed in
+    NOT_THE_TOOLBOX_FACT with what it means instead."""
+    domain, function = path.parts[-3], path.stem
+    d = domains.load(domain)
+    # the domain's own numbers: its task text and the relation gaps the facts state
+    own = _stated(d.task) | {round(d.on_gap, 6), round(d.adjacent_gap, 6)}
+    copied = [
+        (line, name, v, TOOLBOX_NAMED[v])
+        for line, name, v in _module_constants(path)
+        if v in TOOLBOX_NAMED
+        and v not in own
+        and (domain, function, name) not in NOT_THE_TOOLBOX_FACT
+    ]
+    assert not copied, f"{path}: toolbox facts written as numbers: {copied}"

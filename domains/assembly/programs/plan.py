@@ -27,8 +27,9 @@ with everything resting only on it must keep its joint centre of mass over its s
    model (`toolbox.robot.Hand`, the one its executor and the plan checks use) finds one grasp
    with room at the pick and at the place, and when it takes no grasp away from a part still
    to move; parts in the fingers' way go aside first. Preferences, never dead ends: a
-   placement that would wall in a goal place still to fill waits, and a temporary place is one
-   from which the part can be taken on to its goal. When no order satisfies the gripper, the
+   placement that would wall in a goal place still to fill waits, and what keeps that place's
+   part from going in (standing in the place, on the part or in its fingers' way) goes aside
+   first, once; a temporary place is one from which the part can be taken on to its goal. When no order satisfies the gripper, the
    geometric order stands. Goals must lie inside the robot's workspace
    (`toolbox.robot.WORKSPACE`); temporary places lie in `toolbox.robot.PLACEMENT`.
 """
@@ -40,17 +41,17 @@ from scipy.spatial import ConvexHull
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
 from toolbox.robot import FINGER_DEPTH, JAW_CLEARANCES, MAX_OPENING, PLACEMENT, WORKSPACE, Hand
+from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP, RESTING_GAP, TOUCHING
 
 DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
-SAME = 0.004  # a part this close to its goal pose counts as placed [m]
+# a part perceived within the perceived states' slack of its goal pose counts as placed [m]
+SAME = PERCEIVED_GAP
 SAME_ANGLE = np.radians(4.0)
 TILT = np.radians(20.0)  # a goal orientation farther than this from every resting pose
-GOAL_OVERLAP = 0.003  # goal parts may interpenetrate this much (perception noise) [m]
-TOUCH = 0.001  # a placement may touch others this deep [m]
-# perceived states hold parts up to 3 mm into one another (the domain facts): a part still to
-# move that comes this near a place may in truth stand in it [m]
-PERCEIVED_OVERLAP = GOAL_OVERLAP
+# perceived states hold parts up to PERCEIVED_OVERLAP into one another (toolbox.stability):
+# goal parts may overlap that much, and a part still to move that comes that near a place may
+# in truth stand in it; a placement may touch others TOUCHING deep
 # temporary places keep this far inside the robot's workspace, where the arm is comfortable [m]
 REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 GRID = 0.01  # spacing of candidate temporary places [m]
@@ -264,23 +265,23 @@ def _snap_goal(goal, mesh):
         drop = _lowest(mesh[i], T)  # down to the table
         for j, U in placed.items():
             gap, axis = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], U, cutoff=0.02)
-            if axis[2] >= 0.7 and -GOAL_OVERLAP <= gap < drop:
+            if axis[2] >= 0.7 and -PERCEIVED_OVERLAP <= gap < drop:
                 drop = gap
         if drop > ON_GAP:
             return None, f"'{i}' floats {1000 * drop:.0f} mm above its support in the goal"
-        if drop >= -GOAL_OVERLAP:
+        if drop >= -PERCEIVED_OVERLAP:
             T = T.copy()
             T[2, 3] -= drop
         placed[i] = T
     recs = _records(placed, mesh)
-    hits = collisions(recs, SHAPES, tolerance=GOAL_OVERLAP)
+    hits = collisions(recs, SHAPES, tolerance=PERCEIVED_OVERLAP)
     if hits:
         a, b, depth = hits[0]
         return None, f"'{a}' and '{b}' overlap by {1000 * depth:.0f} mm in the goal"
     for i, T in placed.items():
         if not _in_region(_footprint(mesh[i], T), WORKSPACE.x, WORKSPACE.y, WORKSPACE.reach):
             return None, f"'{i}' is out of the robot's reach in the goal"
-    bad = unstable_objects(recs, SHAPES, contact_tol=0.002, margin=-0.002)
+    bad = unstable_objects(recs, SHAPES, contact_tol=RESTING_GAP, margin=-0.002)
     if bad:
         i = sorted(bad)[0]
         return None, f"the goal structure cannot stand: '{i}' {bad[i]}"
@@ -302,14 +303,14 @@ class _World:
     @property
     def sup(self):
         if self._sup is None:
-            self._sup = supports(_records(self.poses, self.mesh), SHAPES, contact_tol=0.002)
+            self._sup = supports(_records(self.poses, self.mesh), SHAPES, contact_tol=RESTING_GAP)
         return self._sup
 
     def loaded(self):
         """Parts something rests on."""
         return {j for s in self.sup.values() for j in s}
 
-    def hits(self, i, T, tolerance=TOUCH, clearance=0.0, skip=()):
+    def hits(self, i, T, tolerance=TOUCHING, clearance=0.0, skip=()):
         """Whether part i at pose T comes closer than `clearance` to another part."""
         box = _geometry(self.mesh[i], T)
         for j, U in self.poses.items():
@@ -325,7 +326,9 @@ class _World:
         return False
 
     def stands(self):
-        return not unstable_objects(_records(self.poses, self.mesh), SHAPES, contact_tol=0.002)
+        return not unstable_objects(
+            _records(self.poses, self.mesh), SHAPES, contact_tol=RESTING_GAP
+        )
 
 
 _HANDS = {}  # mesh keys → the robot's hand model for those meshes
@@ -564,6 +567,7 @@ def _build(start, goal, target, goal_sup, mesh, hand, grip):
                 stack.append(k)
         below[j] = seen
     steps = []
+    cleared_for = set()  # parts whose goal place a deferred placement would wall in
     for _ in range(3 * len(goal) + 2):
         sup = world.sup
         done = {}
@@ -638,12 +642,30 @@ def _build(start, goal, target, goal_sup, mesh, hand, grip):
                         if not is_done(j):
                             in_the_way.append((j, i, T))
                     continue
-                if slot_taken(i, T):  # another goal place would lose its room: later
-                    deferred = deferred or (i, T)
+                walls_in = _takes_slot(world, i, T, target, pending, final, below)
+                if walls_in:  # another goal place would lose its room: later
+                    deferred = deferred or (i, T, walls_in)
                     continue
             move = (i, T)
             break
-        move = move or deferred  # a preference, never a dead end
+        walled = [j for j in deferred[2] if j not in cleared_for] if deferred else []
+        if move is None and walled:
+            # before walling a place in, clear the way (once) for the part that goes there
+            cleared_for.update(walled)
+            move = _clear_the_way(
+                world,
+                walled,
+                target,
+                goal_sup,
+                is_done,
+                mesh,
+                [(j, k, U) for j, k, U in in_the_way if k in walled],
+                grip,
+                poor_place,
+                any_stack=False,
+            )
+            move = move if isinstance(move, tuple) else None
+        move = move or (deferred and deferred[:2])  # a preference, never a dead end
         if move is None:
             move = _clear_the_way(
                 world, ready, target, goal_sup, is_done, mesh, in_the_way, grip, poor_place
@@ -656,8 +678,13 @@ def _build(start, goal, target, goal_sup, mesh, hand, grip):
     return {"status": "infeasible", "reason": f"no plan within {len(steps)} moves"}
 
 
-def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, grip, poor_place):
-    """A move of one blocking part to a temporary place, or the reason there is none."""
+def _clear_the_way(
+    world, ready, target, goal_sup, is_done, mesh, in_the_way, grip, poor_place, any_stack=True
+):
+    """A move of one blocking part to a temporary place, or the reason there is none: a part
+    in the fingers' way (`in_the_way`: (part, for part, its target)), on, over or in the goal
+    place of a `ready` part, or (`any_stack`) the highest movable part of a stack in the wrong
+    order."""
     keep = {}  # part → outlines it must stay clear of: where the fingers must go
     room_for = {}  # part → the moves (i, T) whose fingers it is in the way of
     for j, i, T in in_the_way:
@@ -679,7 +706,7 @@ def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, gr
                 SHAPES[mesh[i]], T, SHAPES[mesh[j]], world.poses[j], cutoff=2 * PERCEIVED_OVERLAP
             )
             if is_done(j):
-                blocks = gap < -TOUCH
+                blocks = gap < -TOUCHING
             else:  # perceived apart from i's goal, so it may in truth stand in it
                 blocks = gap < PERCEIVED_OVERLAP or i in _hangs_over(after, j)
             if blocks:
@@ -687,7 +714,7 @@ def _clear_the_way(world, ready, target, goal_sup, is_done, mesh, in_the_way, gr
     # a stack in the wrong order: the highest part that is not final and can be lifted
     loaded = world.loaded()
     for i in sorted(world.poses, key=lambda i: (-_lowest(mesh[i], world.poses[i]), i)):
-        if not is_done(i) and i not in loaded:
+        if any_stack and not is_done(i) and i not in loaded:
             candidates.append(i)
     seen = []
     for b in candidates:

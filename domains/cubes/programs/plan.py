@@ -25,11 +25,13 @@ import numpy as np
 
 from toolbox import cube_symmetries
 from toolbox.robot import JAW_CLEARANCES, PLACEMENT, WORKSPACE, Hand, Workspace
+from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP
 
 SIDE = 0.04  # cube edge [m]
 HALF = SIDE / 2
 ON_GAP = 0.008  # vertical gap still read as resting on [m]
-SAME = 0.004  # a cube this close to its goal position counts as placed [m]
+# a cube perceived within the perceived states' slack of its goal position counts as placed [m]
+SAME = PERCEIVED_GAP
 SAME_YAW = np.radians(4.0)  # … and this close in yaw, modulo 90°
 # goals may lie anywhere in the workspace (with 5 mm of slack for perception) [m]
 SLACK = 0.005
@@ -49,9 +51,8 @@ FALLBACK_CLEARANCES = (
     (JAW_CLEARANCES[0], 0.0),
 )
 SLIVER = 0.0002  # footprints overlapping deeper than this share a column (not rounding) [m]
-# perceived states hold objects up to 3 mm into one another (the domain facts): a cube still to
-# move that comes this near a goal place may in truth stand in it [m]
-PERCEIVED_OVERLAP = 0.003
+# perceived states hold objects up to PERCEIVED_OVERLAP into one another (toolbox.stability): a
+# cube still to move that comes this near a goal place may in truth stand in it
 NEAR = 0.2  # cubes farther apart than this never meet the gripper at the other [m]
 
 
