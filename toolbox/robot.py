@@ -27,10 +27,11 @@ release they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or
 `JAW_CLEARANCES[1]` when a neighbour is too close for that (`toolbox.finger_footprints` draws
 the open fingers from above for such an opening; each fingertip reaches `FINGER_DEPTH` outwards
 from its pad and is `FINGER_WIDTH` wide), and the hand keeps `GRASP_MARGINS[0]` from every
-neighbour, or `GRASP_MARGINS[1]` where no grasp has that much room. The held object turns with the arm's last joint,
-whose range is `WRIST_RANGE` (the FR3's ±172.8°): between the pick and the place the wrist turns
-by the object's turn, so a grasp that leaves the wrist near one end of its range cannot make a
-long turn that way; a grasp half a turn from it may. Records are ``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
+neighbour, or `GRASP_MARGINS[1]` where no grasp has that much room. The held object turns with
+the arm's last joint, whose range is `WRIST_RANGE` (the FR3's ±172.8°): between the pick and
+the place the wrist turns by the object's turn, so a grasp that leaves the wrist near one end
+of its range cannot make a long turn that way; a grasp half a turn from it may. Records are
+``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
 """
 
 from __future__ import annotations

@@ -29,9 +29,10 @@ with everything resting only on it must keep its joint centre of mass over its s
    to move; parts in the fingers' way go aside first. Preferences, never dead ends: a
    placement that would wall in a goal place still to fill waits, and what keeps that place's
    part from going in (standing in the place, on the part or in its fingers' way) goes aside
-   first, once; a temporary place is one from which the part can be taken on to its goal. When no order satisfies the gripper, the
-   geometric order stands. Goals must lie inside the robot's workspace
-   (`toolbox.robot.WORKSPACE`); temporary places lie in `toolbox.robot.PLACEMENT`.
+   first, once; a temporary place is one from which the part can be taken on to its goal.
+   When no order satisfies the gripper, the geometric order stands. Goals must lie inside the
+   robot's workspace (`toolbox.robot.WORKSPACE`); temporary places lie in
+   `toolbox.robot.PLACEMENT`.
 """
 
 import itertools
