@@ -22,16 +22,16 @@ arm is comfortably within reach: put objects aside there. Where a domain packs p
 and how far a part may move for that (`toolbox.spread_footprints`).
 
 `Hand(meshes, symmetries).can_move(...)` answers all of this but the arm's joint limits (the
-checks add an IK test). `MAX_OPENING` is the widest the jaws open; for the approach and the
-release they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or
-`JAW_CLEARANCES[1]` when a neighbour is too close for that (`toolbox.finger_footprints` draws
-the open fingers from above for such an opening; each fingertip reaches `FINGER_DEPTH` outwards
-from its pad and is `FINGER_WIDTH` wide), and the hand keeps `GRASP_MARGINS[0]` from every
-neighbour, or `GRASP_MARGINS[1]` where no grasp has that much room. The held object turns with
-the arm's last joint, whose range is `WRIST_RANGE` (the FR3's ±172.8°): between the pick and
-the place the wrist turns by the object's turn, so a grasp that leaves the wrist near one end
-of its range cannot make a long turn that way; a grasp half a turn from it may. Records are
-``{"id", "mesh", "pose"}``, poses `T_world_object` (4, 4).
+checks add an IK test). `MAX_OPENING` is the widest the jaws open; for the approach and the release
+they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or `JAW_CLEARANCES[1]` when a
+neighbour is too close for that (`toolbox.finger_footprints` draws the open fingers from above for
+such an opening; each fingertip reaches `FINGER_DEPTH` outwards from its pad and is `FINGER_WIDTH`
+wide), and the hand keeps `GRASP_MARGINS[0]` from every neighbour, or `GRASP_MARGINS[1]` where no
+grasp has that much room; a held object's sweep may touch others `SWEEP_TOUCH` deep, and a tilt
+under `YAW_ONLY` [rad] is a turn about the vertical. The held object turns with the arm's last
+joint, whose range is `WRIST_RANGE`: between the pick and the place the wrist turns by the object's
+turn, so a grasp that leaves the wrist near one end of its range cannot make a long turn that way;
+a grasp half a turn from it may. Records and poses are as in `toolbox.stability`.
 """
 
 from __future__ import annotations
@@ -64,8 +64,10 @@ __all__ = [
     "MAX_OPENING",
     "PLACEMENT",
     "PLACEMENT_SPREAD",
+    "SWEEP_TOUCH",
     "WORKSPACE",
     "WRIST_RANGE",
+    "YAW_ONLY",
     "Grasp",
     "GraspReport",
     "Hand",
@@ -79,6 +81,8 @@ JAW_CLEARANCES = FingerModel().clearances  # [m] per side, beyond the gripped wi
 FINGER_DEPTH = FingerModel().segments[0][2]
 FINGER_WIDTH = 2 * FingerModel().segments[0][3]
 GRASP_MARGINS = TOLERANCES.grasp_margins  # [m] gripper to neighbours, larger preferred
+SWEEP_TOUCH = TOLERANCES.sweep_touch  # [m] the held object's sweep may touch others this deep
+YAW_ONLY = TOLERANCES.yaw_only  # [rad] tilt within which a turn is one about the vertical
 WRIST_RANGE = (-3.0159, 3.0159)  # [rad] the FR3's last joint (the flange about the tool axis)
 
 

@@ -15,12 +15,12 @@ penetration and for the face-to-face contacts of resting parts. The table is the
 ("table"). Uniform density. Records are `{"id", "mesh", "pose"}` with `pose` =
 `T_world_object` (4, 4) [m]; `shapes` maps mesh keys to `Shape`s.
 
-Default tolerances (the checks and the scoring judge with them): interpenetration up to
-`TOUCHING` counts as touching; a gap up to `RESTING_GAP` counts as resting on; a centre of mass
-(with its load) may lie `COM_MARGIN` outside its support. Perceived states (`perceive`'s
-output, which `relate` and `plan` receive) are accepted with more slack, since every perceived
-pose carries some error: objects up to `PERCEIVED_OVERLAP` into one another and up to
-`PERCEIVED_GAP` above what holds them up; read overlaps and contacts in them with that slack.
+Default tolerances (the checks and the scoring judge with them): interpenetration up to `TOUCHING`
+counts as touching; a gap up to `RESTING_GAP` counts as resting on; a centre of mass (with its
+load) may lie `COM_MARGIN` outside its support; a contact normal with |z| from `VERTICAL` is a
+support. Perceived states (`perceive`'s output, which `relate` and `plan` receive) are accepted
+with more slack: objects up to `PERCEIVED_OVERLAP` into one another and up to `PERCEIVED_GAP` above
+what holds them up; read overlaps and contacts in them with that slack.
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ __all__ = [
     "PERCEIVED_OVERLAP",
     "RESTING_GAP",
     "TOUCHING",
+    "VERTICAL",
     "RestingPose",
     "Shape",
     "collisions",
@@ -54,6 +55,7 @@ RESTING_GAP = TOLERANCES.contact  # [m] largest gap still counted as resting on
 COM_MARGIN = TOLERANCES.com_margin  # [m] a centre of mass this far outside its support is held
 PERCEIVED_OVERLAP = TOLERANCES.perceived_penetration  # [m] … between perceived objects
 PERCEIVED_GAP = TOLERANCES.perceived_contact  # [m] … under a perceived object
+VERTICAL = TOLERANCES.vertical  # |normal z| from which a contact is a support
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 

@@ -41,8 +41,17 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
-from toolbox.robot import FINGER_DEPTH, JAW_CLEARANCES, MAX_OPENING, PLACEMENT, WORKSPACE, Hand
-from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP, RESTING_GAP, TOUCHING
+from toolbox.robot import (
+    FINGER_DEPTH,
+    GRASP_MARGINS,
+    JAW_CLEARANCES,
+    MAX_OPENING,
+    PLACEMENT,
+    WORKSPACE,
+    YAW_ONLY,
+    Hand,
+)
+from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP, RESTING_GAP, TOUCHING, VERTICAL
 
 DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
@@ -57,8 +66,9 @@ TILT = np.radians(20.0)  # a goal orientation farther than this from every resti
 REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 GRID = 0.01  # spacing of candidate temporary places [m]
 # how far an open finger reaches beyond the side of the part it grips: the jaws' clearance, a
-# fingertip's depth and a margin (toolbox.robot.JAW_CLEARANCES, FINGER_DEPTH)
-FINGER_REACH = JAW_CLEARANCES[0] + FINGER_DEPTH + 0.002  # [m]
+# fingertip's depth and the least margin the hand keeps (toolbox.robot.JAW_CLEARANCES,
+# FINGER_DEPTH, GRASP_MARGINS)
+FINGER_REACH = JAW_CLEARANCES[0] + FINGER_DEPTH + GRASP_MARGINS[-1]  # [m]
 # (to parts, to unbuilt goals) [m], roomiest first: room for both fingers; then half-way to the
 # open jaws' clearance and the jaws' narrower clearance to goals; then the open jaws only
 CLEARANCES = (
@@ -69,6 +79,9 @@ CLEARANCES = (
 # the open hand across its closing direction: the widest opening and a fingertip on each side;
 # a part farther than this from another's box cannot take a grasp of it [m]
 HAND_SPAN = MAX_OPENING + 2 * FINGER_DEPTH
+# a perceived goal's centre of mass may lie this far outside its support (perception, not
+# physics: the goal's own structure stood) [m]
+COM_SLACK = 0.002
 SLIVER = 0.0002  # outlines overlapping deeper than this are above one another (not rounding) [m]
 
 
@@ -224,7 +237,7 @@ def _reachable(mesh, current, goal):
     for S in _symmetries(mesh, yaw_free):
         cand = goal @ S
         rel = cand[:3, :3] @ current[:3, :3].T
-        if rel[2, 2] < np.cos(np.radians(3.0)):
+        if rel[2, 2] < np.cos(YAW_ONLY):
             continue
         yaw = abs(float(np.arctan2(rel[1, 0], rel[0, 0])))
         if yaw < best_yaw - 1e-9:
@@ -266,7 +279,7 @@ def _snap_goal(goal, mesh):
         drop = _lowest(mesh[i], T)  # down to the table
         for j, U in placed.items():
             gap, axis = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], U, cutoff=0.02)
-            if axis[2] >= 0.7 and -PERCEIVED_OVERLAP <= gap < drop:
+            if axis[2] >= VERTICAL and -PERCEIVED_OVERLAP <= gap < drop:
                 drop = gap
         if drop > ON_GAP:
             return None, f"'{i}' floats {1000 * drop:.0f} mm above its support in the goal"
@@ -282,7 +295,7 @@ def _snap_goal(goal, mesh):
     for i, T in placed.items():
         if not _in_region(_footprint(mesh[i], T), WORKSPACE.x, WORKSPACE.y, WORKSPACE.reach):
             return None, f"'{i}' is out of the robot's reach in the goal"
-    bad = unstable_objects(recs, SHAPES, contact_tol=RESTING_GAP, margin=-0.002)
+    bad = unstable_objects(recs, SHAPES, contact_tol=RESTING_GAP, margin=-COM_SLACK)
     if bad:
         i = sorted(bad)[0]
         return None, f"the goal structure cannot stand: '{i}' {bad[i]}"
@@ -317,10 +330,10 @@ class _World:
         for j, U in self.poses.items():
             if j == i or j in skip:
                 continue
-            if _box_gap(box, _geometry(self.mesh[j], U)) > max(clearance, 0.0) + 0.001:
+            if _box_gap(box, _geometry(self.mesh[j], U)) > max(clearance, 0.0) + TOUCHING:
                 continue
             gap, _ = separation(
-                SHAPES[self.mesh[i]], T, SHAPES[self.mesh[j]], U, cutoff=clearance + 0.001
+                SHAPES[self.mesh[i]], T, SHAPES[self.mesh[j]], U, cutoff=clearance + TOUCHING
             )
             if gap < (clearance if clearance > 0 else -tolerance):
                 return True
@@ -402,10 +415,10 @@ def _hangs_over(world, i, T=None):
     fi = _footprint(mesh[i], T)
     out = []
     for j in sorted(poses):
-        if j == i or _geometry(mesh[j], poses[j])[3][2] < top - 0.002:
+        if j == i or _geometry(mesh[j], poses[j])[3][2] < top - RESTING_GAP:
             continue
         for lo, hull in _pieces(mesh[j], poses[j]):
-            if lo >= top - 0.002 and _outline_gap(fi, hull) < -SLIVER:
+            if lo >= top - RESTING_GAP and _outline_gap(fi, hull) < -SLIVER:
                 out.append(j)
                 break
     return out

@@ -20,6 +20,7 @@ import networkx as nx
 import numpy as np
 
 from toolbox import Shape, separation
+from toolbox.stability import VERTICAL  # |axis z| above which a contact is a support
 
 RELATIONS = {
     "on": "source rests on target: source's bottom touches target's top (vertical gap at most "
@@ -34,7 +35,6 @@ RELATIONS = {
 }
 ON_GAP = 0.008  # [m]
 ADJACENT_GAP = 0.005  # [m]
-VERTICAL = 0.7  # |axis z| above which a contact is a support
 ABOVE = 0.002  # [m] how far a blocking part may reach below the top of the one it blocks
 OVERLAP = 0.002  # [m] least overlap of outlines seen from above
 

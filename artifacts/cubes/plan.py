@@ -14,11 +14,13 @@ reach (floating or interpenetrating cubes, unknown ids) gives an explicit "infea
 The robot is a parallel-jaw gripper (Robotiq 2F-85) coming down from above, so a move is only
 made when the robot's own hand model (`toolbox.robot.Hand`, the model its executor and the
 plan checks use) finds a grasp with room among the other cubes at the pick and at the place,
-and when it does not take away the last grasp of a cube that still has to move. A cube in the
-fingers' way goes to a temporary place first. When no order satisfies that, the plan falls
-back to the geometric order alone. Goals must lie inside the robot's workspace
-(`toolbox.robot.WORKSPACE`); temporary places are in the placement region
-(`toolbox.robot.PLACEMENT`), where the arm is comfortable.
+and when it does not take away the last grasp of a cube that still has to move: neither where
+that cube stands now nor at its goal place (a cube with goal neighbours on two perpendicular
+sides goes before the second of them, or the jaws find no way down). A cube in the fingers'
+way goes to a temporary place first. When no order satisfies that, the plan falls back to the
+geometric order alone. Goals must lie inside the robot's workspace (`toolbox.robot.WORKSPACE`);
+temporary places are in the placement region (`toolbox.robot.PLACEMENT`), where the arm is
+comfortable.
 """
 
 import numpy as np
@@ -50,6 +52,9 @@ FALLBACK_CLEARANCES = (
     ((CLEARANCE + JAW_CLEARANCES[0]) / 2, JAW_CLEARANCES[1]),
     (JAW_CLEARANCES[0], 0.0),
 )
+# footprints or heights that overlap by more than this do overlap (not rounding, not two
+# perceived cubes that touch) [m]
+OVERLAP = 0.002
 SLIVER = 0.0002  # footprints overlapping deeper than this share a column (not rounding) [m]
 # perceived states hold objects up to PERCEIVED_OVERLAP into one another (toolbox.stability): a
 # cube still to move that comes this near a goal place may in truth stand in it
@@ -97,7 +102,7 @@ def _footprint_gap(a, b):
 
 def _rests_on(a, b):
     """Cube a rests on cube b."""
-    return abs(a[2] - b[2] - SIDE) <= ON_GAP and _footprint_gap(a, b) < -0.002
+    return abs(a[2] - b[2] - SIDE) <= ON_GAP and _footprint_gap(a, b) < -OVERLAP
 
 
 def _supporters(poses):
@@ -140,7 +145,7 @@ def _snap_goal(goal):
     for k, i in enumerate(ids):
         for j in ids[k + 1 :]:
             a, b = snapped[i], snapped[j]
-            if abs(a[2] - b[2]) < SIDE - 0.002 and _footprint_gap(a, b) < -0.002:
+            if abs(a[2] - b[2]) < SIDE - OVERLAP and _footprint_gap(a, b) < -OVERLAP:
                 return None, f"'{i}' and '{j}' overlap in the goal"
     return snapped, ""
 
@@ -150,7 +155,7 @@ def _in_column(p, q, settled):
     vertically, so even a sliver overhanging p is in its way; and a cube still to move (not
     `settled` in its goal) was perceived apart from p's goal, so one nearer to p than perceived
     states' slack may in truth stand in it."""
-    if q[2] <= p[2] - SIDE + 0.002:
+    if q[2] <= p[2] - SIDE + OVERLAP:
         return False
     return _footprint_gap(p, q) < (-SLIVER if settled else PERCEIVED_OVERLAP)
 
@@ -205,6 +210,22 @@ def _takes_grasp(hand, i, p, current, pickable):
         if j != i
         and np.hypot(*(current[j][:2] - p[:2])) < NEAR
         and not hand.room(j, current[j], after)
+    ]
+
+
+def _takes_place(hand, i, goal, placed, pending):
+    """Cubes of `pending` whose goal place keeps room for the fingers among the cubes already
+    `placed` in their goals, but not once cube i is in its goal too: placing i first would wall
+    that place in (two neighbours on perpendicular sides leave the jaws no way down), so the
+    pending cube goes first."""
+    built = {j: goal[j] for j in placed if j != i}
+    return [
+        j
+        for j in pending
+        if j != i
+        and np.hypot(*(goal[j][:2] - goal[i][:2])) < NEAR
+        and hand.room(j, goal[j], built)
+        and not hand.room(j, goal[j], {**built, i: goal[i]})
     ]
 
 
@@ -298,6 +319,7 @@ def _build(start, goal, hand):
         )
         movers = [j for j in goal if not is_done(j)] if grip else []
         pickable = [j for j in movers if hand.room(j, current[j], current)]
+        placed = [j for j in goal if is_done(j)]
         move, in_the_way = None, []
         for i in ready:
             if i not in loaded and _column_free(i, goal[i], current, is_done):
@@ -307,6 +329,8 @@ def _build(start, goal, hand):
                     if blockers:  # no room for the gripper, or it would take a grasp away
                         in_the_way += [j for j in blockers if j not in in_the_way]
                         continue
+                    if _takes_place(hand, i, goal, placed, movers):
+                        continue  # a cube still to come goes first
                 move = (i, goal[i])
                 break
         if move is None:

@@ -26,6 +26,7 @@ import numpy as np
 
 from toolbox.packing import finger_footprints, footprint, polygon_gap
 from toolbox.robot import GRASP_MARGINS, JAW_CLEARANCES
+from toolbox.stability import TOUCHING
 
 RELATIONS = {
     "adjacent": "the two pieces' footprints are at most 8 mm apart (edge to edge or corner to "
@@ -66,7 +67,7 @@ def relate(records, meshes):
     for k, a in enumerate(ids):
         for b in ids[k + 1 :]:
             gap, _ = polygon_gap(plate[a], plate[b])
-            if gap <= -0.001 and abs(z[a][0] - z[b][0]) > 0.005:  # stacked, not side by side
+            if gap <= -TOUCHING and abs(z[a][0] - z[b][0]) > 0.005:  # stacked, not side by side
                 upper, lower = (a, b) if z[a][0] > z[b][0] else (b, a)
                 if abs(z[upper][0] - z[lower][1]) <= ON_GAP:
                     g.add_edge(upper, lower, type="on")

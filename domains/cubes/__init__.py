@@ -127,6 +127,41 @@ def cells_structure(cells: Sequence[tuple[float, float, int]], ids: Sequence[str
     )
 
 
+GRID_STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
+
+
+def task_structure(rng: np.random.Generator, n: int = 6) -> list[tuple[float, float, int]] | None:
+    """Grid cells (i, j, level) of any structure the task text allows ("stacks, towers,
+    pyramids and rows", 6 mm apart): a connected base on the table, then cubes on a cube or
+    across two side-by-side cubes of one level (a pyramid's step); None when the draw runs out
+    of places. Neither the dev catalogue nor the test families: the property tests and
+    `benchmarks.compositions_bench` draw goals from it (`cells_structure` builds them)."""
+    cells: list[tuple[float, float, int]] = [(0.0, 0.0, 0)]
+    base = int(rng.integers(2, n + 1))
+    while len(cells) < base:
+        i, j, _ = cells[int(rng.integers(len(cells)))]
+        di, dj = GRID_STEPS[int(rng.integers(4))]
+        if (i + di, j + dj, 0) not in cells:
+            cells.append((i + di, j + dj, 0))
+    for _ in range(200):
+        if len(cells) == n:
+            return cells
+        a = cells[int(rng.integers(len(cells)))]
+        if rng.random() < 0.5:
+            cell = (a[0], a[1], a[2] + 1)
+        else:
+            side = [b for b in cells if b[2] == a[2] and abs(b[0] - a[0]) + abs(b[1] - a[1]) == 1]
+            if not side:
+                continue
+            b = side[int(rng.integers(len(side)))]
+            cell = ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2, a[2] + 1)
+        if not any(
+            c[2] == cell[2] and abs(c[0] - cell[0]) < 1 and abs(c[1] - cell[1]) < 1 for c in cells
+        ):
+            cells.append(cell)
+    return cells if len(cells) == n else None
+
+
 @register("cubes")
 class Cubes(Domain):
     name = "cubes"

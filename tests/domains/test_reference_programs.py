@@ -248,6 +248,10 @@ NOT_THE_TOOLBOX_FACT = {
     ("assembly", "relate", "ABOVE"): "a height band for `blocks` (outlines seen from above)",
     ("assembly", "relate", "OVERLAP"): "the least overlap of outlines that makes a `blocks` edge",
     ("tangram", "plan", "DONE_POS"): "how near its goal a piece is left where it lies",
+    ("assembly", "plan", "COM_SLACK"): "how far outside its support a perceived goal's centre of "
+    "mass may lie (the toolbox's COM_MARGIN is a margin inside it)",
+    ("cubes", "plan", "OVERLAP"): "footprints or heights overlapping by more than rounding and "
+    "perceived contact",
 }
 
 
@@ -299,3 +303,59 @@ def test_a_tolerance_the_toolbox_names_is_taken_by_its_name(path):
         and (domain, function, name) not in NOT_THE_TOOLBOX_FACT
     ]
     assert not copied, f"{path}: toolbox facts written as numbers: {copied}"
+
+
+def _inline_numbers(source: str) -> list[tuple[int, float]]:
+    """(line, |value|) of each number a program writes inline: every float literal but a
+    module-level `NAME = <number>` (named constants are judged by their name), and an angle
+    written in degrees (`np.radians(3.0)`) as the radians it means."""
+    tree = ast.parse(source)
+    skip = {
+        id(node.value.operand if isinstance(node.value, ast.UnaryOp) else node.value)
+        for node in tree.body
+        if isinstance(node, ast.Assign)
+    }
+    out = []
+    for n in ast.walk(tree):
+        if (
+            isinstance(n, ast.Call)
+            and getattr(n.func, "attr", getattr(n.func, "id", None)) in ("radians", "deg2rad")
+            and n.args
+            and isinstance(n.args[0], ast.Constant)
+        ):
+            skip.add(id(n.args[0]))
+            out.append((n.lineno, round(abs(float(np.radians(n.args[0].value))), 6)))
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Constant) and isinstance(n.value, float) and id(n) not in skip:
+            out.append((n.lineno, round(abs(n.value), 6)))
+    return sorted(out)
+
+
+def test_inline_numbers_are_read():
+    source = "A = 0.7\nB = -0.002\nC = np.radians(4.0)\ndef f(x):\n    return x > -0.001 and np.cos(math.radians(3))\n"
+    assert _inline_numbers(source) == [
+        (3, round(float(np.radians(4.0)), 6)),
+        (5, 0.001),
+        (5, round(float(np.radians(3.0)), 6)),
+    ]
+
+
+@pytest.mark.parametrize(
+    "path",
+    [p for p in PROGRAMS if p.stem in ("relate", "plan")],
+    ids=lambda p: f"{p.parts[-3]}/{p.name}",
+)
+def test_no_toolbox_fact_is_written_inline(path):
+    """The same rule for numbers written inline (`axis[2] >= 0.7`, `np.cos(np.radians(3.0))`,
+    `top - 0.002`): one that equals a tolerance or angle the toolbox names is written as the name
+    (`VERTICAL`, `YAW_ONLY`, `RESTING_GAP`), or, when it means something else, as a named
+    constant of the program that says what (and is listed in NOT_THE_TOOLBOX_FACT)."""
+    d = domains.load(path.parts[-3])
+    own = _stated(d.task) | {round(d.on_gap, 6), round(d.adjacent_gap, 6)}
+    lines = path.read_text().splitlines()
+    copied = [
+        (line, v, TOOLBOX_NAMED[v], lines[line - 1].strip())
+        for line, v in _inline_numbers(path.read_text())
+        if v in TOOLBOX_NAMED and v not in own
+    ]
+    assert not copied, f"{path}: toolbox facts written inline: {copied}"

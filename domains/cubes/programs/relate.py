@@ -1,5 +1,6 @@
 # Written by people (the RIVET team), not by a model: the hand-written reference `relate` for
-# the cubes domain, the level a model's program should reach. It uses only numpy and networkx.
+# the cubes domain, the level a model's program should reach. It uses numpy, networkx and the
+# toolbox's VERTICAL.
 """relate(records, meshes) -> graph: support and adjacency between cubes, from geometry.
 
 Each record's mesh is placed at its pose; two convex bodies are compared with the
@@ -11,6 +12,8 @@ horizontal one a side contact ("adjacent").
 import networkx as nx
 import numpy as np
 
+from toolbox.stability import VERTICAL  # |axis z| above which a contact is a support
+
 RELATIONS = {
     "on": "source rests on target: source's bottom touches target's top (vertical gap at most "
     "8 mm); a cube on two cubes has two 'on' edges; nothing is 'on' the table (not a node)",
@@ -19,7 +22,6 @@ RELATIONS = {
 }
 ON_GAP = 0.008  # [m]
 ADJACENT_GAP = 0.012  # [m]
-VERTICAL = 0.7  # |axis_z| above which a contact is a support
 
 
 def _body(mesh, pose):
