@@ -12,15 +12,16 @@ vertical is kept from the goal (cube rows and pyramids need it to fit). A goal t
 reach (floating or interpenetrating cubes, unknown ids) gives an explicit "infeasible".
 
 The robot is a parallel-jaw gripper (Robotiq 2F-85) coming down from above, so a move is only
-made when the robot's own hand model (`toolbox.robot.Hand`, the model its executor and the
-plan checks use) finds a grasp with room among the other cubes at the pick and at the place,
-and when it does not take away the last grasp of a cube that still has to move: neither where
-that cube stands now nor at its goal place (a cube with goal neighbours on two perpendicular
-sides goes before the second of them, or the jaws find no way down). A cube in the fingers'
-way goes to a temporary place first. When no order satisfies that, the plan falls back to the
-geometric order alone. Goals must lie inside the robot's workspace (`toolbox.robot.WORKSPACE`);
-temporary places are in the placement region (`toolbox.robot.PLACEMENT`), where the arm is
-comfortable.
+made when the robot's own hand model (`toolbox.robot.Hand`, the model its executor and the plan
+checks use) finds a grasp with room among the other cubes at the pick and at the place, and
+when it does not take away the last grasp of a cube that still has to move: neither where that
+cube stands now nor at its goal place (a cube with goal neighbours on two perpendicular sides
+goes before the second of them, or the jaws find no way down). The goal places are therefore
+filled in an order, found once by a depth-first search, in which each has room for the fingers
+among those filled before it. A cube in the fingers' way goes to a temporary place first. When
+no order satisfies that, the plan falls back to the geometric order alone. Goals must lie
+inside the robot's workspace (`toolbox.robot.WORKSPACE`); temporary places are in the placement
+region (`toolbox.robot.PLACEMENT`), where the arm is comfortable.
 """
 
 import numpy as np
@@ -229,6 +230,35 @@ def _takes_place(hand, i, goal, placed, pending):
     ]
 
 
+def _goal_order(hand, goal, goal_sup):
+    """An order of the goal places in which each cube, put down after its supporters, has room
+    for the fingers among the cubes placed before it (depth-first, lowest goal first; memoised
+    on the placed set), or None when there is none. Cubes that wall each other's places in
+    (each beside one and at right angles to another) need it: the greedy step sees one
+    placement ahead only."""
+    ids = sorted(goal, key=lambda i: (goal[i][2], i))
+    dead = set()
+
+    def extend(order):
+        if len(order) == len(ids):
+            return order
+        placed = frozenset(order)
+        if placed in dead:
+            return None
+        built = {j: goal[j] for j in order}
+        for i in ids:
+            if i in placed or not set(goal_sup[i]) <= placed:
+                continue
+            if hand.room(i, goal[i], built):
+                found = extend([*order, i])
+                if found is not None:
+                    return found
+        dead.add(placed)
+        return None
+
+    return extend([])
+
+
 def _temporary(i, current, pending, hand=None, pickable=()):
     """A free place on the table for cube i, as near as possible to where it is; with a
     `hand`, one the gripper can put it down at, taking no grasp from the cubes of `pickable`."""
@@ -292,6 +322,8 @@ def _build(start, goal, hand):
     the gripper room at both ends and no cube still to move without a grasp."""
     grip = hand is not None
     goal_sup = _supporters(goal)
+    order = _goal_order(hand, goal, goal_sup) if grip else None
+    rank = {i: k for k, i in enumerate(order)} if order else {}
     current = dict(start)
     steps = []
     for _ in range(4 * len(goal) + 4):
@@ -315,7 +347,7 @@ def _build(start, goal, hand):
         loaded = {j for i in current for j in sup[i]}
         ready = sorted(
             (i for i in goal if not is_done(i) and all(is_done(j) for j in goal_sup[i])),
-            key=lambda i: (goal[i][2], i),
+            key=lambda i: (rank.get(i, 0), goal[i][2], i),
         )
         movers = [j for j in goal if not is_done(j)] if grip else []
         pickable = [j for j in movers if hand.room(j, current[j], current)]
