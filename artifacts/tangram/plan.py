@@ -52,7 +52,6 @@ from toolbox.robot import (
     JAW_CLEARANCES,
     PLACEMENT,
     PLACEMENT_SPREAD,
-    SWEEP_TOUCH,
     WORKSPACE,
     WRIST_RANGE,
 )
@@ -85,9 +84,8 @@ DONE_YAW = np.radians(2.0)
 # gaps opened between goal pieces, moving no piece more than this (the executor can hit it) [m]
 SPREAD_GAP, SPREAD_SHIFT = PLACEMENT_SPREAD
 FREE_GAP = TOUCHING  # a target this close to a piece not yet at its goal is occupied [m]
-# … overlapping a piece at its goal deeper than its sweep may touch (spreading could not open
-# everything) [m]
-PLACED_GAP = -SWEEP_TOUCH
+EDGE_GAP = 0.0005  # the figure's pieces lie this far apart, edge to edge (the task text) [m]
+PLACED_GAP = -EDGE_GAP  # … to a piece at its goal (spreading could not open everything) [m]
 # a turn the wrist makes with either of two grasps half a turn apart: one of them leaves it
 # within a quarter turn of the middle of WRIST_RANGE, from where it turns WRIST_RANGE[1] - 90°
 # (83°) either way; less, for where the arm's own pose puts the wrist

@@ -248,8 +248,6 @@ NOT_THE_TOOLBOX_FACT = {
     ("assembly", "relate", "ABOVE"): "a height band for `blocks` (outlines seen from above)",
     ("assembly", "relate", "OVERLAP"): "the least overlap of outlines that makes a `blocks` edge",
     ("tangram", "plan", "DONE_POS"): "how near its goal a piece is left where it lies",
-    ("assembly", "plan", "COM_SLACK"): "how far outside its support a perceived goal's centre of "
-    "mass may lie (the toolbox's COM_MARGIN is a margin inside it)",
     ("cubes", "plan", "OVERLAP"): "footprints or heights overlapping by more than rounding and "
     "perceived contact",
 }

@@ -79,9 +79,6 @@ CLEARANCES = (
 # the open hand across its closing direction: the widest opening and a fingertip on each side;
 # a part farther than this from another's box cannot take a grasp of it [m]
 HAND_SPAN = MAX_OPENING + 2 * FINGER_DEPTH
-# a perceived goal's centre of mass may lie this far outside its support (perception, not
-# physics: the goal's own structure stood) [m]
-COM_SLACK = 0.002
 SLIVER = 0.0002  # outlines overlapping deeper than this are above one another (not rounding) [m]
 
 
@@ -295,7 +292,8 @@ def _snap_goal(goal, mesh):
     for i, T in placed.items():
         if not _in_region(_footprint(mesh[i], T), WORKSPACE.x, WORKSPACE.y, WORKSPACE.reach):
             return None, f"'{i}' is out of the robot's reach in the goal"
-    bad = unstable_objects(recs, SHAPES, contact_tol=RESTING_GAP, margin=-COM_SLACK)
+    # a perceived goal's centre of mass may lie outside its support by the perceived slack
+    bad = unstable_objects(recs, SHAPES, contact_tol=RESTING_GAP, margin=-PERCEIVED_OVERLAP)
     if bad:
         i = sorted(bad)[0]
         return None, f"the goal structure cannot stand: '{i}' {bad[i]}"
