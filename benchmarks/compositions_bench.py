@@ -27,33 +27,18 @@ from typing import Any
 import numpy as np
 
 import domains
-from domains import _layout
-from domains.cubes import COLOURS, cells_structure, task_structure
 from domains.errors import GenerationError
 
 DEFAULT_PLAN = Path(domains.__file__).parent / "cubes" / "programs" / "plan.py"
 
 
 def draw(domain: Any, seed: int) -> tuple[list[dict], list[dict], bool] | None:
-    """(start, goal, feasible) of a task-text composition, or None when `seed` gives no
-    scene."""
-    rng = np.random.default_rng(seed)
-    cells = task_structure(rng)
-    if cells is None:
+    """(start, goal, feasible) of a task-text composition (`Domain.compose`), or None when
+    `seed` gives no scene."""
+    drawn = domain.compose(seed)
+    if drawn is None:
         return None
-    ids = [str(i) for i in rng.permutation(COLOURS)]
-    try:
-        goal = _layout.scatter(
-            rng,
-            [cells_structure(cells, ids)],
-            domain.parts,
-            domain.placement,
-            clearance=0.05,
-            yaws=(-np.pi / 2, np.pi / 2),
-        )
-        start = domain.make_start(rng, goal)
-    except GenerationError:
-        return None
+    start, goal = drawn
     try:
         domain.robot_reference_planner.order(start, goal)
     except GenerationError:

@@ -38,6 +38,9 @@ class Budget:
     Attributes:
         seed: seeds hypothesis (the instances have their own seeds).
         instance_seeds: generator seeds of the instances every suite draws from.
+        composed: how many composed instances (`Domain.composed_instance`, goals built from
+            what the task text allows rather than from a catalogue) the plan suite adds, the
+            first of `composed_seeds` that have an order the robot can execute.
         observations: (instance index, "start" | "goal", camera name) perceived by `perceive`.
         render_cases: (instance index, side, camera) rendered by `render` for the images.
         examples: hypothesis examples per property family (beyond the explicit ones).
@@ -49,6 +52,8 @@ class Budget:
     name: str
     seed: int = 20250601
     instance_seeds: tuple[int, ...] = tuple(range(1, 9))
+    composed: int = 2
+    composed_seeds: tuple[int, ...] = tuple(range(1, 41))
     observations: tuple[tuple[int, str, str], ...] = (
         (0, "start", "front"),
         (1, "goal", "view1"),
@@ -84,6 +89,7 @@ DEFAULT = Budget(name="default")
 THOROUGH = Budget(
     name="thorough",
     instance_seeds=tuple(range(1, 25)),
+    composed=5,
     observations=tuple(
         (i, side, cam)
         for i, (side, cam) in enumerate(

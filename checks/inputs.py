@@ -54,6 +54,26 @@ def instances(domain: Domain, seeds: tuple[int, ...]) -> list[domains.Instance]:
     return out
 
 
+@lru_cache(maxsize=256)
+def _composed(domain_name: str, seed: int) -> domains.Instance | None:
+    return domains.load(domain_name).composed_instance(seed)
+
+
+def composed(domain: Domain, seeds: tuple[int, ...], n: int) -> list[domains.Instance]:
+    """The first `n` composed instances of `seeds` that have an order the robot can execute
+    (none when the domain has no composer)."""
+    out: list[domains.Instance] = []
+    if domain.composed_goals is None:
+        return out
+    for s in seeds:
+        if len(out) >= n:
+            break
+        inst = _composed(domain.name, s)
+        if inst is not None:
+            out.append(inst)
+    return out
+
+
 def records(scene: Mapping) -> list[dict]:
     return [
         {"id": o["id"], "mesh": o["mesh"], "pose": np.asarray(o["pose"], float)}
@@ -113,8 +133,9 @@ def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]
       render_camera, truth (true records), reference (the simulator's clean view at the
       render camera's resolution and the full-size observation)};
     - relate: ``scenes``: {name, records, reference (relations)};
-    - plan: ``instances``: {name, start, goal, start_relations, goal_relations, order_len},
-      ``infeasible``: goals no plan reaches, with why.
+    - plan: ``instances``: {name, start, goal, start_relations, goal_relations, order_len}
+      (the generator's, then the domain's composed ones), ``infeasible``: goals no plan
+      reaches, with why.
     """
     pool = instances(domain, budget.instance_seeds)
     cases: dict[str, Any] = {}
@@ -133,6 +154,7 @@ def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]
             for side in ("start", "goal")
         ]
     elif function == "plan":
+        pool = [*pool, *composed(domain, budget.composed_seeds, budget.composed)]
         cases["instances"] = [
             {
                 "name": inst.name,

@@ -40,7 +40,7 @@ from domains.benchmark import (
     check_split,
 )
 from domains.catalogue import CameraSpec, MeshSpec, ObjectSpec, Tolerance
-from domains.errors import DomainError, UnknownObjectError
+from domains.errors import DomainError, GenerationError, UnknownObjectError
 from domains.generation import PhysicsCheck, draw_instance
 from domains.instance import Instance
 from domains.reference_order import ReferencePlanner
@@ -83,6 +83,8 @@ class Domain:
     max_height: ClassVar[float] = 0.35  # highest allowed point of any object [m]
     # the domain properties its drafts are checked for, by function (`checks.properties`)
     properties: ClassVar[dict[str, list[tuple[str, dict[str, Any]]]]] = {}
+    # what `compose` draws, in the words of the plan checks' rule; None: no composer
+    composed_goals: ClassVar[str | None] = None
 
     def __init__(self) -> None:
         self.task: str = (self.root / "task.md").read_text()
@@ -292,6 +294,33 @@ class Domain:
             physics=physics,
             grasps=physics is not None if grasps is None else grasps,
             split=split,
+        )
+
+    def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:
+        """(start, goal) records whose goal is composed from what the task text allows (any
+        structure of its parts, neither split's catalogue) and whose start is drawn as dev
+        starts are; None when the domain has no composer or `seed` gives no scene. The plan
+        checks (`checks.inputs`) and `benchmarks.compositions_bench` draw from it."""
+        return None
+
+    def composed_instance(self, seed: int) -> Instance | None:
+        """`compose(seed)` with a construction order the robot can execute
+        (`robot_reference_planner`), named ``composed/seedS``; None when there is none."""
+        drawn = self.compose(seed)
+        if drawn is None:
+            return None
+        start, goal = drawn
+        try:
+            order = self.robot_reference_planner.order(start, goal)
+        except GenerationError:
+            return None
+        return Instance(
+            domain=self.name,
+            name=f"composed/seed{seed}",
+            seed=seed,
+            start=self.scene(start),
+            goal=self.scene(goal),
+            order=tuple(order),
         )
 
     def benchmark_instance(

@@ -27,7 +27,16 @@ region (`toolbox.robot.PLACEMENT`), where the arm is comfortable.
 import numpy as np
 
 from toolbox import cube_symmetries
-from toolbox.robot import JAW_CLEARANCES, PLACEMENT, WORKSPACE, Hand, Workspace
+from toolbox.robot import (
+    FINGER_DEPTH,
+    GRASP_MARGINS,
+    JAW_CLEARANCES,
+    MAX_OPENING,
+    PLACEMENT,
+    WORKSPACE,
+    Hand,
+    Workspace,
+)
 from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP
 
 SIDE = 0.04  # cube edge [m]
@@ -35,7 +44,8 @@ HALF = SIDE / 2
 ON_GAP = 0.008  # vertical gap still read as resting on [m]
 # a cube perceived within the perceived states' slack of its goal position counts as placed [m]
 SAME = PERCEIVED_GAP
-SAME_YAW = np.radians(4.0)  # … and this close in yaw, modulo 90°
+# … and this close in yaw, modulo 90°: a turn that moves no corner farther than SAME
+SAME_YAW = SAME / (HALF * np.sqrt(2))
 # goals may lie anywhere in the workspace (with 5 mm of slack for perception) [m]
 SLACK = 0.005
 GOALS = Workspace(
@@ -44,22 +54,27 @@ GOALS = Workspace(
     reach=WORKSPACE.reach + SLACK,
 )
 REGION = PLACEMENT  # where cubes are put aside
-GRID = 0.01  # spacing of candidate temporary places [m]
-CLEARANCE = 0.03  # free gap around a temporary place, for the gripper's fingers [m]
-GOAL_CLEARANCE = 0.012  # gap between a temporary place and goals still to build [m]
-# when nothing has that much room: half-way to the open jaws' clearance, and the jaws' narrower
-# clearance to goals (toolbox.robot.JAW_CLEARANCES); then the open jaws only
-FALLBACK_CLEARANCES = (
-    ((CLEARANCE + JAW_CLEARANCES[0]) / 2, JAW_CLEARANCES[1]),
+# how far an open finger reaches beyond the side of the cube it grips: the jaws' clearance, a
+# fingertip's depth and the least margin the hand keeps (toolbox.robot) [m]
+FINGER_REACH = JAW_CLEARANCES[0] + FINGER_DEPTH + GRASP_MARGINS[-1]
+# candidate temporary places lie on a square grid this fine: no free spot as wide as the open
+# jaws' clearance is stepped over [m]
+GRID = JAW_CLEARANCES[0]
+# (to cubes, to goals still to build) [m], roomiest first: room for both fingers and the open
+# jaws' clearance to goals; then half-way, with the jaws' narrower clearance to goals; then the
+# open jaws only
+CLEARANCES = (
+    (FINGER_REACH, JAW_CLEARANCES[0]),
+    ((FINGER_REACH + JAW_CLEARANCES[0]) / 2, JAW_CLEARANCES[1]),
     (JAW_CLEARANCES[0], 0.0),
 )
-# footprints or heights that overlap by more than this do overlap (not rounding, not two
-# perceived cubes that touch) [m]
-OVERLAP = 0.002
+# footprints or heights that overlap by more than this do overlap: perceived cubes that touch
+# may lie this far into one another (toolbox.stability) [m]
+OVERLAP = PERCEIVED_OVERLAP
 SLIVER = 0.0002  # footprints overlapping deeper than this share a column (not rounding) [m]
-# perceived states hold objects up to PERCEIVED_OVERLAP into one another (toolbox.stability): a
-# cube still to move that comes this near a goal place may in truth stand in it
-NEAR = 0.2  # cubes farther apart than this never meet the gripper at the other [m]
+# cubes whose centres are farther apart than the open hand (the widest opening and a fingertip
+# on each side) and a cube's diagonal never meet the gripper at the other [m]
+NEAR = MAX_OPENING + 2 * FINGER_DEPTH + SIDE * np.sqrt(2)
 
 
 def _yaw(R):
@@ -271,13 +286,13 @@ def _temporary(i, current, pending, hand=None, pickable=()):
     ys = np.arange(REGION.y[0], REGION.y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - here[:2], axis=1), kind="stable")
-    levels = ((CLEARANCE, GOAL_CLEARANCE), *FALLBACK_CLEARANCES)
+    levels = CLEARANCES
     if grip:  # keep goals still to build free for the fingers on every side first
-        levels = ((CLEARANCE, CLEARANCE), *levels)
+        levels = ((FINGER_REACH, FINGER_REACH), *levels)
     for clearance, goal_clearance in levels:
         for k in order:
             p = np.array([cand[k][0], cand[k][1], HALF, here[3]])
-            if np.hypot(*(p[:2] - here[:2])) < 0.02:
+            if np.hypot(*(p[:2] - here[:2])) < HALF:
                 continue  # a place, not where it stands
             if not _in_region(_corners(p)):
                 continue

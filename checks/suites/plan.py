@@ -1,7 +1,8 @@
 """The `plan` suite: schema, reaching the goal physically, length, identity, determinism,
 explicit infeasibility.
 
-Instances come from the domain's instance generator; hypothesis varies them — both scenes
+Instances come from the domain's instance generator, and from its composer where it has one
+(goals built from what the task text allows, not from a catalogue); hypothesis varies them — both scenes
 moved together, or the goal made a translation of the start (every object must move, often
 onto another's spot) — and shrinks towards the first instance as generated. A plan is applied
 with `geometry.apply_plan` (what the trials score plans with too): every step must pick a clear object and leave a collision-free,
@@ -55,9 +56,10 @@ RULES: tuple[Rule, ...] = (
     ),
     Rule(
         check="property.reaches_goal",
-        text="On generated start/goal pairs (as generated, both scenes shifted together by up "
-        "to {checks.suites.plan:SHIFT_MM} mm along x and y, or the goal a shifted copy of the "
-        "start) your steps, applied in order, pick only objects nothing rests on, leave after "
+        text="On generated start/goal pairs[? — among them goals composed beyond any "
+        "catalogue, from {domain.composed_goals} —?] (as generated, both scenes shifted together "
+        "by up to {checks.suites.plan:SHIFT_MM} mm along x and y, or the goal a shifted copy of "
+        "the start) your steps, applied in order, pick only objects nothing rests on, leave after "
         "every step no two objects interpenetrating by more than "
         "{geometry.tolerances:TOLERANCES.penetration|mm}, every object resting on the table or "
         "on others (gap at most {geometry.tolerances:TOLERANCES.contact|mm}) with its centre of "

@@ -17,6 +17,7 @@ import numpy as np
 from domains import _layout
 from domains._layout import Unit, unit
 from domains.base import Domain
+from domains.errors import GenerationError
 from domains.generation import retry
 from domains.registry import register
 from geometry import bodies_of, place, yaw_pose
@@ -191,6 +192,10 @@ class Cubes(Domain):
             )
         ],
     }
+    composed_goals = (
+        "any structure of the six cubes the task text allows: rows, stacks, towers and "
+        "pyramids joined in any shape, each cube on the table, on one cube or across two"
+    )
 
     def make_goal(
         self, rng: np.random.Generator, index: int | None, split: str = "dev"
@@ -212,6 +217,27 @@ class Cubes(Domain):
         return _layout.scatter(
             rng, units, self.parts, self.placement, clearance=0.05, yaws=(-np.pi / 2, np.pi / 2)
         )
+
+    def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:
+        """A structure of `task_structure` (any six-cube stack, tower, pyramid or row on the
+        46 mm grid), placed and started as dev goals are."""
+        rng = np.random.default_rng(seed)
+        cells = task_structure(rng)
+        if cells is None:
+            return None
+        ids = [str(i) for i in rng.permutation(COLOURS)]
+        try:
+            goal = _layout.scatter(
+                rng,
+                [cells_structure(cells, ids)],
+                self.parts,
+                self.placement,
+                clearance=0.05,
+                yaws=(-np.pi / 2, np.pi / 2),
+            )
+            return self.make_start(rng, goal), goal
+        except GenerationError:
+            return None
 
     def _test_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
         names = list(TEST_FAMILIES)

@@ -155,6 +155,19 @@ def test_domain_temporary_places_touching(check):
     assert "domain.cubes.temporary_places_clear" in failing(report)
 
 
+def test_plan_walling_goal_places_in_is_caught_on_composed_goals(check):
+    """The bug a fresh model's assembly plans had: a greedy order that puts a goal place's two
+    perpendicular neighbours down first. No generated cubes instance shows it; the composed
+    goals (`Domain.composed_instance`) do."""
+    from benchmarks.checks_bench import catalogue, load_mutants, programs
+
+    mutants = load_mutants(catalogue("cubes"), programs("cubes"))
+    mutant = next(m for m in mutants if m.name == "plan_walls_goal_places_in")
+    report = check("plan", mutant.source)
+    assert failing(report) == ["property.gripper_room"]
+    assert "composed/seed" in by_name(report, "property.gripper_room")["message"]
+
+
 # -- images -----------------------------------------------------------------------------------
 
 

@@ -117,9 +117,9 @@ def test_plans_derive_no_region_that_reproduces_the_generators(path):
 
 
 def _lengths_and_angles() -> dict[float, str]:
-    """The executor's, the checks' and the scoring's own lengths [m] and angles (in degrees as
-    a program writes them in `np.radians(...)`), by value → name: what a program can know only
-    when its prompt or the task text states it."""
+    """The executor's, the checks', the scoring's and the generators' own lengths [m] and
+    angles (in degrees as a program writes them in `np.radians(...)`), by value → name: what a
+    program can know only when its prompt or the task text states it."""
     from geometry.tolerances import TOLERANCES
     from sim.executor import ExecutorConfig
 
@@ -143,6 +143,18 @@ def _lengths_and_angles() -> dict[float, str]:
         add(f"ExecutorConfig.{f}", getattr(config, f))
     add("ExecutorConfig.in_hand.position", config.in_hand.position)
     add("ExecutorConfig.in_hand.rotation", config.in_hand.rotation, angle=True)
+    # the generators': the construction planner's clearances and grid, the scenes' spacings
+    from domains.reference_order import ReferencePlanner
+
+    for f, field in ReferencePlanner.__dataclass_fields__.items():
+        if isinstance(field.default, float):
+            add(f"ReferencePlanner.{f}", field.default)
+    add("Domain.temp_clearance", Domain.temp_clearance)
+    for name in domains.names():
+        module = type(domains.load(name)).__module__
+        for attr, value in vars(__import__(module, fromlist=["_"])).items():
+            if attr.isupper() and isinstance(value, float):
+                add(f"{module}.{attr}", value)
     return named
 
 
@@ -207,6 +219,8 @@ def test_the_hidden_constants_are_found_and_stated_numbers_read():
     assert HIDDEN[0.12] in {"ExecutorConfig.min_transfer_height", "FingerModel.palm_from"}
     assert HIDDEN[0.003] in {"TOLERANCES.perceived_penetration", "FingerModel.tip_margin"}
     assert {0.025, 0.0003, 0.3} <= set(HIDDEN)  # inner half width, in-hand noise (m and °)
+    assert HIDDEN[0.03] == "ReferencePlanner.clearance"  # the generator's temporary places
+    assert HIDDEN[0.055] == "domains.assembly.PILLARS_FOR_BEAM"  # its scenes' spacings
     assert {0.003, 3.0, 0.04, 0.5, 0.16} <= _stated("3 mm, 3°, 4 cm and 0.5\n| 160 × 35 |")
 
 
@@ -216,8 +230,8 @@ def test_the_hidden_constants_are_found_and_stated_numbers_read():
     ids=lambda p: f"{p.parts[-3]}/{p.name}",
 )
 def test_no_unstated_constant_of_the_executor_or_the_checks_is_in_a_program(path, prompts):
-    """A literal in `relate` or `plan` equal to a length or angle of the executor, the checks
-    or the scoring must be one the program's prompt or task text states: otherwise it was
+    """A literal in `relate` or `plan` equal to a length or angle of the executor, the checks,
+    the scoring or the generators must be one the program's prompt or task text states: otherwise it was
     copied (or lands on the hidden value by chance, which a reader cannot tell apart). Derive
     it from the toolbox's facts or the stated sizes instead. (`perceive`'s numbers are about
     pixels, colours and search grids: a value threshold of 0.12 is not the palm's height.)"""

@@ -57,14 +57,14 @@ DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
 # a part perceived within the perceived states' slack of its goal pose counts as placed [m]
 SAME = PERCEIVED_GAP
-SAME_ANGLE = np.radians(4.0)
 TILT = np.radians(20.0)  # a goal orientation farther than this from every resting pose
 # perceived states hold parts up to PERCEIVED_OVERLAP into one another (toolbox.stability):
 # goal parts may overlap that much, and a part still to move that comes that near a place may
 # in truth stand in it; a placement may touch others TOUCHING deep
-# temporary places keep this far inside the robot's workspace, where the arm is comfortable [m]
 REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
-GRID = 0.01  # spacing of candidate temporary places [m]
+# candidate temporary places lie on a square grid this fine: no free spot as wide as the open
+# jaws' clearance is stepped over [m]
+GRID = JAW_CLEARANCES[0]
 # how far an open finger reaches beyond the side of the part it grips: the jaws' clearance, a
 # fingertip's depth and the least margin the hand keeps (toolbox.robot.JAW_CLEARANCES,
 # FINGER_DEPTH, GRASP_MARGINS)
@@ -141,6 +141,11 @@ SYMMETRY = {
 }
 SHAPES = {k: Shape.from_pieces(v) for k, v in PIECES.items()}
 REST = {k: [p.rotation for p in stable_poses(s)] for k, s in SHAPES.items()}
+# … and within this angle of its goal orientation: a turn that moves no point of the part
+# farther than SAME [rad]
+SAME_ANGLE = {
+    k: SAME / float(np.linalg.norm(np.concatenate(v), axis=1).max()) for k, v in PIECES.items()
+}
 
 FINGER_ROOM = 0.05  # a part moved out of the fingers' way keeps this far from them [m]
 SLOT_TRIES = 40  # temporary places tried for one that leaves goal places room and the
@@ -253,7 +258,7 @@ def _same(mesh, a, b):
                 ang = np.arccos(np.clip(a[:3, 2] @ c[:3, 2], -1.0, 1.0))
             else:
                 ang = np.arccos(np.clip((np.trace(a[:3, :3].T @ c[:3, :3]) - 1) / 2, -1.0, 1.0))
-            if ang <= SAME_ANGLE:
+            if ang <= SAME_ANGLE[mesh]:
                 return True
     return False
 
@@ -379,7 +384,7 @@ def _takes_slot(world, i, T, target, pending, final, below):
     but not once part i is at T as well: i would wall the place in, so it had better wait.
     `below[j]`: the parts j rests on in the goal, directly or not (they go first anyway)."""
     _, _, lo, hi = _geometry(world.mesh[i], T)
-    lo, hi = lo - 0.15, hi + 0.15
+    lo, hi = lo - HAND_SPAN, hi + HAND_SPAN
     out = []
     for j in pending:
         if j == i or i in below[j]:
