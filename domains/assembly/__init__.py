@@ -23,7 +23,7 @@ from domains.base import Domain
 from domains.errors import GenerationError
 from domains.generation import retry
 from domains.registry import register
-from geometry import TOLERANCES, place, yaw_pose
+from geometry import TOLERANCES, Workspace, place, yaw_pose
 
 MESH = {
     "pillar_1": "pillar",
@@ -163,6 +163,10 @@ class Assembly(Domain):
             ("temporary_clear_of_goals", {}),
         ],
     }
+    composed_goals = (
+        "any of the dev goals' main structures under any top, with any second structure or "
+        "none, the parts packed 3–30 mm apart"
+    )
 
     def make_goal(
         self, rng: np.random.Generator, index: int | None, split: str = "dev"
@@ -197,6 +201,33 @@ class Assembly(Domain):
             )
         yaws = (np.pi / 2 - 0.5, np.pi / 2 + 0.5)
         return _layout.scatter(rng, units, self.parts, self.placement, clearance=0.04, yaws=yaws)
+
+    def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:
+        """The dev goals' main structures, tops and second structures combined freely (the
+        catalogue pairs them 20 ways) and packed closer than any catalogue goal: a gap drawn
+        in `COMPOSED_GAP`, the units' origins in a `COMPOSED_AREA` box centred in the middle
+        half of the placement region; started as dev goals are."""
+        rng = np.random.default_rng(seed)
+        main, top, second = (kinds[int(rng.integers(len(kinds)))] for kinds in COMPOSED_KINDS)
+        members = _main(str(main), top)
+        used = {i for i, _ in members}
+        extra = _second(second) if second else []
+        if any(i in used for i, _ in extra):
+            return None
+        used |= {i for i, _ in extra}
+        units = [_unit(members)] + ([_unit(extra)] if extra else [])
+        units += [_unit([(i, np.eye(4))]) for i in MESH if i not in used]
+        gap = float(rng.uniform(*COMPOSED_GAP))
+        (x0, x1), (y0, y1) = self.placement.x, self.placement.y
+        cx = float(rng.uniform(x0 + (x1 - x0) / 4, x1 - (x1 - x0) / 4))
+        cy = float(rng.uniform(y0 + (y1 - y0) / 4, y1 - (y1 - y0) / 4))
+        w, h = COMPOSED_AREA
+        area = Workspace(x=(cx - w / 2, cx + w / 2), y=(cy - h / 2, cy + h / 2), reach=1.0)
+        try:
+            goal = _layout.scatter(rng, units, self.parts, self.placement, clearance=gap, area=area)
+            return self.make_start(rng, goal), goal
+        except GenerationError:
+            return None
 
     def make_start(
         self, rng: np.random.Generator, goal: Sequence[Mapping], split: str = "dev"
@@ -357,6 +388,12 @@ TEST_START_CLEARANCE = 0.015  # between start units in the test split [m] (dev: 
 
 
 # Start stacks (base, top): small parts left on a flat top.
+# what `Assembly.compose` combines: the dev goals' main structures, tops, second structures
+COMPOSED_KINDS = tuple(tuple(sorted({g[k] for g in GOALS}, key=str)) for k in range(3))
+COMPOSED_GAP = (0.003, 0.03)  # between the composed goal's units [m]
+COMPOSED_AREA = (0.2, 0.3)  # the box (along x, y) the units' origins are drawn in [m]
+
+
 STACKS = (
     ("beam", "block"),
     ("beam", "cylinder"),

@@ -57,17 +57,3 @@ def test_every_step_leaves_the_fingers_room(cubes, reference_plan, seed):
     assume(drawn is not None and drawn[2])  # a scene, with an order the robot can execute
     start, goal, _ = drawn
     assert verdict(cubes, reference_plan, start, goal) == "ok"
-
-
-def test_composed_instances_carry_an_executable_order(cubes):
-    """`Domain.composed_instance`: the plan checks' composed goals come with an order the
-    robot's hand model accepts step by step; domains without a composer give none."""
-    from benchmarks.compositions_bench import hand_problem
-    from checks.inputs import composed
-
-    got = composed(cubes, tuple(range(1, 41)), 2)
-    assert [i.name.split("/")[0] for i in got] == ["composed", "composed"]
-    for inst in got:
-        assert inst.order and hand_problem(cubes, inst.start["objects"], inst.order) is None
-    assert domains.load("tangram").composed_instance(1) is None
-    assert composed(domains.load("tangram"), (1, 2, 3), 2) == []
