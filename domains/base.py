@@ -297,10 +297,11 @@ class Domain:
         )
 
     def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:
-        """(start, goal) records whose goal is composed from what the task text allows (any
-        structure of its parts, neither split's catalogue) and whose start is drawn as dev
-        starts are; None when the domain has no composer or `seed` gives no scene. The plan
-        checks (`checks.inputs`) and `benchmarks.compositions_bench` draw from it."""
+        """(start, goal) records whose goal no split's catalogue holds — composed from the
+        parts the task text allows, in shapes, combinations or spacings the catalogue does not
+        use (`composed_goals` says which) — and whose start is drawn as dev starts are; None
+        when the domain has no composer or `seed` gives no scene. The plan checks
+        (`checks.inputs`) and `benchmarks.compositions_bench` draw from it."""
         return None
 
     def composed_instance(self, seed: int) -> Instance | None:

@@ -2,9 +2,9 @@
 explicit infeasibility.
 
 Instances come from the domain's instance generator, and from its composer where it has one
-(goals built from what the task text allows, not from a catalogue); hypothesis varies them — both scenes
-moved together, or the goal made a translation of the start (every object must move, often
-onto another's spot) — and shrinks towards the first instance as generated. A plan is applied
+(goals no catalogue holds, `Domain.compose`); hypothesis varies them — both scenes moved
+together, or the goal made a translation of the start (every object must move, often onto
+another's spot) — and shrinks towards the first instance as generated. A plan is applied
 with `geometry.apply_plan` (what the trials score plans with too): every step must pick a clear object and leave a collision-free,
 supported state inside the workspace, and the last state must match the goal within the
 domain's tolerance. The states' relations come from the frozen `relate` when the draft has one

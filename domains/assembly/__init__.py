@@ -206,7 +206,7 @@ class Assembly(Domain):
         """The dev goals' main structures, tops and second structures combined freely (the
         catalogue pairs them 20 ways) and packed closer than any catalogue goal: a gap drawn
         in `COMPOSED_GAP`, the units' origins in a `COMPOSED_AREA` box centred in the middle
-        half of the placement region; started as dev goals are."""
+        half of the placement region; started as dev starts are."""
         rng = np.random.default_rng(seed)
         main, top, second = (kinds[int(rng.integers(len(kinds)))] for kinds in COMPOSED_KINDS)
         members = _main(str(main), top)
@@ -387,13 +387,13 @@ TEST_STACKS = (
 TEST_START_CLEARANCE = 0.015  # between start units in the test split [m] (dev: 0.03)
 
 
-# Start stacks (base, top): small parts left on a flat top.
 # what `Assembly.compose` combines: the dev goals' main structures, tops, second structures
 COMPOSED_KINDS = tuple(tuple(sorted({g[k] for g in GOALS}, key=str)) for k in range(3))
 COMPOSED_GAP = (0.003, 0.03)  # between the composed goal's units [m]
 COMPOSED_AREA = (0.2, 0.3)  # the box (along x, y) the units' origins are drawn in [m]
 
 
+# Start stacks (base, top): small parts left on a flat top.
 STACKS = (
     ("beam", "block"),
     ("beam", "cylinder"),
