@@ -163,6 +163,23 @@ def task_structure(rng: np.random.Generator, n: int = 6) -> list[tuple[float, fl
     return cells if len(cells) == n else None
 
 
+def shape_key(cells: Sequence[tuple[float, float, int]]) -> tuple:
+    """The cells' shape up to turns by 90°, mirroring and shifts on the grid (a sorted tuple)."""
+    keys = []
+    for mirror in (1, -1):
+        for turn in range(4):
+            pts = [(i, mirror * j, lv) for i, j, lv in cells]
+            for _ in range(turn):
+                pts = [(-j, i, lv) for i, j, lv in pts]
+            i0, j0 = min(p[0] for p in pts), min(p[1] for p in pts)
+            keys.append(tuple(sorted((i - i0, j - j0, lv) for i, j, lv in pts)))
+    return min(keys)
+
+
+# the test split's goal shapes, which composed goals (`Cubes.compose`) never take
+TEST_SHAPES = frozenset(shape_key(v) for vs in TEST_FAMILIES.values() for v in vs)
+
+
 @register("cubes")
 class Cubes(Domain):
     name = "cubes"
@@ -220,10 +237,11 @@ class Cubes(Domain):
 
     def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:
         """A structure of `task_structure` (any six-cube stack, tower, pyramid or row on the
-        46 mm grid), placed and started as dev goals are."""
+        46 mm grid), placed and started as dev goals are; never one of the test split's
+        families (up to turns and mirroring: those stay held out)."""
         rng = np.random.default_rng(seed)
         cells = task_structure(rng)
-        if cells is None:
+        if cells is None or shape_key(cells) in TEST_SHAPES:
             return None
         ids = [str(i) for i in rng.permutation(COLOURS)]
         try:

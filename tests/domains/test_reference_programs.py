@@ -119,7 +119,9 @@ def test_plans_derive_no_region_that_reproduces_the_generators(path):
 def _lengths_and_angles() -> dict[float, str]:
     """The executor's, the checks', the scoring's and the generators' own lengths [m] and
     angles (in degrees as a program writes them in `np.radians(...)`), by value → name: what a
-    program can know only when its prompt or the task text states it."""
+    program can know only when its prompt or the task text states it. Of the generators: the
+    construction planner's fields and the domain modules' float constants (not their tuples,
+    class attributes or numbers written inline)."""
     from geometry.tolerances import TOLERANCES
     from sim.executor import ExecutorConfig
 
@@ -261,9 +263,6 @@ TOOLBOX_NAMED = _toolbox_named()
 NOT_THE_TOOLBOX_FACT = {
     ("assembly", "relate", "ABOVE"): "a height band for `blocks` (outlines seen from above)",
     ("assembly", "relate", "OVERLAP"): "the least overlap of outlines that makes a `blocks` edge",
-    ("tangram", "plan", "DONE_POS"): "how near its goal a piece is left where it lies",
-    ("cubes", "plan", "OVERLAP"): "footprints or heights overlapping by more than rounding and "
-    "perceived contact",
 }
 
 
