@@ -64,7 +64,8 @@ SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "square": 4,
     "parallelogram": 2,
 }
-KNOB_HALF = 0.008  # the 16 mm square knob (the task text) [m]
+KNOB = 0.016  # the square knob's side (the task text: "a 16 mm square knob") [m]
+KNOB_HALF = KNOB / 2
 # the jaws around a knob with neighbours close by: the smaller approach clearance per side
 OPENING = 2 * KNOB_HALF + 2 * JAW_CLEARANCES[-1]
 FINGER_MARGIN = GRASP_MARGINS[-1]  # the least clearance the hand keeps around its fingers [m]
