@@ -3,10 +3,11 @@
 # toolbox's exact polyhedral geometry (toolbox.stability).
 """plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal structure.
 
-The parts' shapes come from the task's dimensions as convex pieces (the arch: two legs and
-sixteen slabs over its half-round opening; the L-block: foot and leg), so support, collision
-and stability are decided on the real shapes (`toolbox.stability`), loads included: a part
-with everything resting only on it must keep its joint centre of mass over its support.
+The parts' shapes are cut from the meshes `plan` receives into exact convex pieces
+(`toolbox.Shape.from_mesh`: the arch into its legs and the slabs over its opening; the L-block
+into foot and leg), so support, collision and stability are decided on the real shapes
+(`toolbox.stability`), loads included: a part with everything resting only on it must keep its
+joint centre of mass over its support.
 
 1. Goal: every pose is snapped to a resting pose of its part (the nearest stable orientation,
    turned about the vertical) and dropped onto what carries it. A part floating, parts
@@ -35,7 +36,7 @@ with everything resting only on it must keep its joint centre of mass over its s
    `toolbox.robot.PLACEMENT`.
 """
 
-import itertools
+import hashlib
 
 import numpy as np
 from scipy.spatial import ConvexHull
@@ -53,7 +54,6 @@ from toolbox.robot import (
 )
 from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP, RESTING_GAP, TOUCHING, VERTICAL
 
-DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
 # a part perceived within the perceived states' slack of its goal pose counts as placed [m]
 SAME = PERCEIVED_GAP
@@ -82,53 +82,6 @@ HAND_SPAN = MAX_OPENING + 2 * FINGER_DEPTH
 SLIVER = 0.0002  # outlines overlapping deeper than this are above one another (not rounding) [m]
 
 
-def _box(sx, sy, sz, x0=0.0, z0=0.0):
-    return np.array(
-        [
-            (x0 + a * sx / 2, b * sy / 2, z0 + c * sz)
-            for a in (-1, 1)
-            for b in (-1, 1)
-            for c in (0, 1)
-        ]
-    )
-
-
-def _profile(xz):
-    """A convex x–z polygon extruded by DEPTH along y."""
-    xz = np.asarray(xz, dtype=float)
-    return np.concatenate([np.c_[xz[:, 0], np.full(len(xz), y), xz[:, 1]] for y in (-1, 1)]) * [
-        1,
-        DEPTH / 2,
-        1,
-    ]
-
-
-def _arch():
-    w, h, r, spring = 0.06, 0.065, 0.03, 0.02
-    t = np.linspace(np.pi, 0.0, 17)
-    arc = np.c_[r * np.cos(t), spring + r * np.sin(t)]
-    pieces = [_profile([(-w, 0), (-r, 0), (-r, h), (-w, h)])]
-    for a, b in itertools.pairwise(arc):
-        pieces.append(_profile([a, b, (b[0], h), (a[0], h)]))
-    pieces.append(_profile([(r, 0), (w, 0), (w, h), (r, h)]))
-    return pieces
-
-
-def _cylinder(radius=0.02, height=0.06, sides=48):
-    t = np.arange(sides) * 2 * np.pi / sides
-    ring = np.c_[radius * np.cos(t), radius * np.sin(t)]
-    return [np.concatenate([np.c_[ring, np.zeros(sides)], np.c_[ring, np.full(sides, height)]])]
-
-
-PIECES = {  # the task's parts, origin at the centre of the bottom of their upright bounding box
-    "pillar": [_box(0.03, 0.03, 0.08)],
-    "beam": [_box(0.16, DEPTH, 0.02)],
-    "block": [_box(0.05, DEPTH, 0.03)],
-    "cylinder": _cylinder(),
-    "roof": [_profile([(-0.07, 0), (0.07, 0), (0, 0.04)])],
-    "lblock": [_box(0.08, DEPTH, 0.03), _box(0.03, DEPTH, 0.04, x0=-(0.08 - 0.03) / 2, z0=0.03)],
-    "arch": _arch(),
-}
 # symmetries from the task: (kind, order about z, half height for the flip)
 SYMMETRY = {
     "pillar": ("dihedral", 4, 0.08 / 2),
@@ -139,13 +92,30 @@ SYMMETRY = {
     "cylinder": ("revolution", 0, 0.06 / 2),
     "lblock": ("identity", 1, 0.0),
 }
-SHAPES = {k: Shape.from_pieces(v) for k, v in PIECES.items()}
-REST = {k: [p.rotation for p in stable_poses(s)] for k, s in SHAPES.items()}
-# … and within this angle of its goal orientation: a turn that moves no point of the part
-# farther than SAME [rad]
-SAME_ANGLE = {
-    k: SAME / float(np.linalg.norm(np.concatenate(v), axis=1).max()) for k, v in PIECES.items()
-}
+# each part's shape is cut from the mesh `plan` receives into exact convex pieces
+# (`Shape.from_mesh`: the arch into its legs and the slabs over its opening, the L-block into
+# foot and leg), at the first call that brings the mesh; with it its resting orientations and
+# the turn within which it counts as in its goal orientation (one that moves no point of the
+# part farther than SAME) [rad]
+SHAPES = {}  # mesh key → Shape
+REST = {}  # mesh key → rotations (3, 3) of its resting poses
+SAME_ANGLE = {}  # mesh key → [rad]
+_MESH_HASH = {}  # mesh key → content hash of the mesh its shape was cut from
+
+
+def _learn_shapes(meshes):
+    for k, m in meshes.items():
+        v = np.ascontiguousarray(np.asarray(m.vertices, dtype=np.float64))
+        f = np.ascontiguousarray(np.asarray(m.faces, dtype=np.int64))
+        digest = hashlib.sha1(v.tobytes() + f.tobytes()).hexdigest()
+        if _MESH_HASH.get(k) == digest:
+            continue
+        s = Shape.from_mesh(m)
+        SHAPES[k], _MESH_HASH[k] = s, digest
+        REST[k] = [p.rotation for p in stable_poses(s)]
+        SAME_ANGLE[k] = SAME / float(np.linalg.norm(np.concatenate(s.pieces), axis=1).max())
+        _GEOMETRY.clear()
+
 
 FINGER_ROOM = 0.05  # a part moved out of the fingers' way keeps this far from them [m]
 SLOT_TRIES = 40  # temporary places tried for one that leaves goal places room and the
@@ -363,16 +333,23 @@ def _room(world, j, G):
     return world.hand.can_pick(_records({**world.poses, j: G}, world.mesh), j).ok
 
 
+def _reach_box(mesh, T):
+    """The corners (x, y) of the part's box at T grown by the open hand's span: a part whose
+    box lies outside cannot be in the way of a grasp, whatever its height (the hand comes
+    from above)."""
+    _, _, lo, hi = _geometry(mesh, T)
+    return lo[:2] - HAND_SPAN, hi[:2] + HAND_SPAN
+
+
 def _takes_grasp(world, after, i, T, movers):
     """Parts of `movers` near pose T that can be picked in `world` but not once part i is at T."""
-    _, _, lo, hi = _geometry(world.mesh[i], T)
-    lo, hi = lo - HAND_SPAN, hi + HAND_SPAN
+    lo, hi = _reach_box(world.mesh[i], T)
     out = []
     for j in movers:
         if j == i:
             continue
         _, _, lo_j, hi_j = _geometry(world.mesh[j], world.poses[j])
-        if np.any(lo_j > hi) or np.any(hi_j < lo):
+        if np.any(lo_j[:2] > hi) or np.any(hi_j[:2] < lo):
             continue
         if _room(world, j, world.poses[j]) and not _room(after, j, world.poses[j]):
             out.append(j)
@@ -383,14 +360,13 @@ def _takes_slot(world, i, T, target, pending, final, below):
     """Parts of `pending` whose goal place has room for the gripper among the `final` parts
     but not once part i is at T as well: i would wall the place in, so it had better wait.
     `below[j]`: the parts j rests on in the goal, directly or not (they go first anyway)."""
-    _, _, lo, hi = _geometry(world.mesh[i], T)
-    lo, hi = lo - HAND_SPAN, hi + HAND_SPAN
+    lo, hi = _reach_box(world.mesh[i], T)
     out = []
     for j in pending:
         if j == i or i in below[j]:
             continue
         _, _, lo_j, hi_j = _geometry(world.mesh[j], target[j])
-        if np.any(lo_j > hi) or np.any(hi_j < lo):
+        if np.any(lo_j[:2] > hi) or np.any(hi_j[:2] < lo):
             continue
         base = _World({**final, j: target[j]}, world.mesh, world.hand)
         if _room(base, j, target[j]) and not _room(base.moved(i, T), j, target[j]):
@@ -545,8 +521,9 @@ def plan(start_state, goal_state, meshes):
         }
     mesh = {i: str(r["mesh"]) for i, r in start_recs.items()}
     for i, r in goal_recs.items():
-        if str(r["mesh"]) != mesh[i] or mesh[i] not in SHAPES:
+        if str(r["mesh"]) != mesh[i] or mesh[i] not in SYMMETRY or mesh[i] not in meshes:
             return {"status": "infeasible", "reason": f"'{i}' has no known shape ({mesh[i]!r})"}
+    _learn_shapes(meshes)
     start = {i: np.asarray(r["pose"], dtype=float) for i, r in start_recs.items()}
     goal, why = _snap_goal({i: np.asarray(r["pose"], float) for i, r in goal_recs.items()}, mesh)
     if goal is None:
