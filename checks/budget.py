@@ -81,6 +81,11 @@ class Budget:
     online: Mapping[str, float] = field(default_factory=lambda: dict(ONLINE_BUDGET))
     hard_observations: int = 1  # plus the most occluded views of `hard_seeds`' instances
     hard_seeds: tuple[int, ...] = tuple(range(1, 17))
+    # plus the first views of `Domain.hidden_scene(s)` for s in `hidden_seeds` that hide its
+    # object entirely from the front camera (the task text's hiding case; none when the domain
+    # draws none)
+    hidden: int = 1
+    hidden_seeds: tuple[int, ...] = tuple(range(1, 101))
     shrink_calls: int = 20
     translation_mm: int = 150  # largest common shift `relate`'s invariance property tries
 
@@ -105,5 +110,6 @@ THOROUGH = Budget(
     examples={"plan": 60, "order": 50, "translation": 50, "determinism": 4, "identity": 8},
     hard_observations=3,
     hard_seeds=tuple(range(1, 41)),
+    hidden=2,
     shrink_calls=60,
 )

@@ -104,18 +104,70 @@ def _observation(domain_name: str, seed: int, side: str, cam: str, scale: int) -
 def _realistic(domain_name: str, seed: int, side: str, cam: str) -> dict[str, Any]:
     """The observation `perceive` is checked on (`CHECK_REALISM`), seeded by the instance."""
     from sim.observation import observe
-    from sim.realism import DEFAULT
 
-    level = dataclasses.replace(
-        DEFAULT, name=CHECK_REALISM, calib_translation=0.0, calib_rotation=0.0
-    )
     domain = domains.load(domain_name)
     inst = _instance(domain_name, seed)
     assert inst is not None
     scene = inst.start if side == "start" else inst.goal
     return observe(
-        domain, scene, camera(domain, cam, 1), seed=seed * 2 + (side == "goal"), realism=level
+        domain, scene, camera(domain, cam, 1), seed=seed * 2 + (side == "goal"), realism=_level()
     )
+
+
+def _level():
+    """`CHECK_REALISM`: the default realism level seen through the true camera."""
+    from sim.realism import DEFAULT
+
+    return dataclasses.replace(
+        DEFAULT, name=CHECK_REALISM, calib_translation=0.0, calib_rotation=0.0
+    )
+
+
+@lru_cache(maxsize=16)
+def _hidden(domain_name: str, seed: int) -> tuple[list[dict], str] | None:
+    """(records, id) of `Domain.hidden_scene(seed)` when the scene is valid and its object
+    shows no pixel to the front camera; None otherwise."""
+    from sim.settle import check_scene
+    from toolbox import render_scene
+
+    domain = domains.load(domain_name)
+    drawn = domain.hidden_scene(seed)
+    if drawn is None:
+        return None
+    recs, behind = records(domain.scene(drawn[0])), drawn[1]
+    mask = render_scene(recs, domain.meshes(), camera(domain, "front", HALF_RES))["mask"]
+    if (mask == [r["id"] for r in recs].index(behind)).any():
+        return None
+    if check_scene(domain, domain.scene(drawn[0])):
+        return None
+    return recs, behind
+
+
+def hidden_views(domain: Domain, seeds: tuple[int, ...], n: int) -> list[tuple[int, list, str]]:
+    """(seed, records, hidden id) of the first `n` of `seeds` whose `Domain.hidden_scene` hides
+    its object entirely from the front camera."""
+    out: list[tuple[int, list, str]] = []
+    for s in seeds:
+        if len(out) >= n:
+            break
+        got = _hidden(domain.name, s)
+        if got is not None:
+            out.append((s, *got))
+    return out
+
+
+@lru_cache(maxsize=16)
+def _hidden_observation(domain_name: str, seed: int) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(clean view with mask, observation as `_realistic` makes them) of a hidden scene."""
+    from sim.observation import observe
+
+    domain = domains.load(domain_name)
+    got = _hidden(domain_name, seed)
+    assert got is not None
+    scene = domain.scene(got[0])
+    cam = camera(domain, "front", 1)
+    clean = observe(domain, scene, cam, noise=None, mask=True)
+    return clean, observe(domain, scene, cam, seed=seed, realism=_level())
 
 
 def _subsample(view: Mapping[str, Any], scale: int) -> dict[str, Any]:
@@ -219,6 +271,26 @@ def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]
                     "camera_name": cam,
                     "render_camera": camera(domain, cam, HALF_RES),
                     "truth": recs,
+                    "reference": {**_subsample(clean, HALF_RES), "full": full},
+                }
+            )
+        for seed, recs, behind in hidden_views(domain, budget.hidden_seeds, budget.hidden):
+            clean, full = _hidden_observation(domain.name, seed)
+            obs.append(
+                {
+                    "name": f"hidden/seed{seed}/front",
+                    "observation": {
+                        "rgb": full["rgb"],
+                        "depth": full["depth"],
+                        "camera": full["camera"],
+                    },
+                    "camera": full["camera"],
+                    "camera_name": "front",
+                    "render_camera": camera(domain, "front", HALF_RES),
+                    "truth": recs,
+                    # shown nowhere and holding nothing up: it must be reported, but where it
+                    # stands the image cannot say
+                    "unscored": [behind],
                     "reference": {**_subsample(clean, HALF_RES), "full": full},
                 }
             )

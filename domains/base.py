@@ -304,6 +304,14 @@ class Domain:
         (`checks.inputs`) and `benchmarks.compositions_bench` draw from it."""
         return None
 
+    def hidden_scene(self, seed: int) -> tuple[list[dict], str] | None:
+        """(records, id): a scene of the task text's hiding case — the object `id` stands
+        behind others, as seen from the front camera, and holds nothing up — or None when the
+        domain draws none or `seed` gives none. Whether the object is in fact hidden, and the
+        scene valid, is for the caller to test (the perceive checks keep the draws that hide it
+        entirely; `benchmarks.occlusion_bench` scores them all)."""
+        return None
+
     def composed_instance(self, seed: int) -> Instance | None:
         """`compose(seed)` with a construction order the robot can execute
         (`robot_reference_planner`), named ``composed/seedS``; None when there is none."""

@@ -27,6 +27,11 @@ from geometry.tolerances import TOLERANCES
 SIDE = 0.04  # cube edge [m]
 PITCH = 0.046  # centre distance of neighbours in rows and pyramid bases: 6 mm gap [m]
 COLOURS = ("red", "green", "blue", "yellow", "purple", "cyan")
+# `Cubes.hidden_scene`: the cube behind a tower stands this far behind its centre and at most
+# this far to the side; the other cubes keep their centres this far apart [m]
+HIDDEN_BEHIND = (0.045, 0.075)
+HIDDEN_ASIDE = 0.03
+HIDDEN_APART = 0.075
 
 # Goal compositions: ("stack", n) a column, ("row", n) a row, ("pyramid", 3|6) 2-1 or 3-2-1.
 # Benchmark goal k ≥ 2 uses COMPOSITIONS[k - 2]; goal 1 is the reference pyramid.
@@ -256,6 +261,37 @@ class Cubes(Domain):
             return self.make_start(rng, goal), goal
         except GenerationError:
             return None
+
+    def hidden_scene(self, seed: int) -> tuple[list[dict], str] | None:
+        """A tower of two or three cubes anywhere in the placement region, turned any way, and
+        a cube behind it (farther from the front camera: less x), `HIDDEN_BEHIND` behind and up
+        to `HIDDEN_ASIDE` to the side, turned like the tower or not; the other cubes apart on
+        the table. The task text's "a cube behind a tower may not show at all"."""
+        rng = np.random.default_rng(seed)
+        ids = [str(i) for i in rng.permutation(COLOURS)]
+        region, half = self.placement, SIDE / 2
+        k = int(rng.integers(2, 4))
+        x0 = rng.uniform(region.x[0] + HIDDEN_BEHIND[1] + half, region.x[1] - half)
+        y0 = rng.uniform(region.y[0] + HIDDEN_ASIDE + half, region.y[1] - HIDDEN_ASIDE - half)
+        yaw = rng.uniform(0.0, np.pi / 2)
+        recs = [
+            self.record(ids[j], yaw_pose(x0, y0, half * (2 * j + 1), yaw + rng.normal(0, 0.02)))
+            for j in range(k)
+        ]
+        dx, dy = rng.uniform(*HIDDEN_BEHIND), rng.uniform(-HIDDEN_ASIDE, HIDDEN_ASIDE)
+        turned = yaw if rng.random() < 0.5 else rng.uniform(0.0, np.pi / 2)
+        recs.append(self.record(ids[k], yaw_pose(x0 - dx, y0 + dy, half, turned)))
+        taken = [(x0, y0), (x0 - dx, y0 + dy)]
+        for oid in ids[k + 1 :]:
+            for _ in range(200):
+                x, y = rng.uniform(*region.x), rng.uniform(*region.y)
+                if all(np.hypot(x - a, y - b) > HIDDEN_APART for a, b in taken):
+                    break
+            else:
+                return None
+            taken.append((x, y))
+            recs.append(self.record(oid, yaw_pose(x, y, half, rng.uniform(0.0, np.pi / 2))))
+        return recs, ids[k]
 
     def _test_goal(self, rng: np.random.Generator, index: int | None) -> list[dict]:
         names = list(TEST_FAMILIES)

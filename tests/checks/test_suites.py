@@ -168,6 +168,20 @@ def test_plan_walling_goal_places_in_is_caught_on_composed_goals(check):
     assert "composed/seed" in by_name(report, "property.gripper_room")["message"]
 
 
+@pytest.mark.slow
+def test_perceive_dropping_a_cube_nothing_shows_is_caught_on_the_hidden_scene(check):
+    """A cube behind a tower that holds nothing up: the task text says `perceive` still
+    reports it. No generated instance's view hides one (`hardest_views` skips such views);
+    `Domain.hidden_scene` does, and its pose is not scored, only that it is reported."""
+    from benchmarks.checks_bench import catalogue, load_mutants, programs
+
+    mutants = load_mutants(catalogue("cubes"), programs("cubes"))
+    mutant = next(m for m in mutants if m.name == "perceive_drops_unshown")
+    report = check("perceive", mutant.source)
+    assert failing(report) == ["property.ids_match_catalogue"]
+    assert "hidden/seed" in by_name(report, "property.ids_match_catalogue")["message"]
+
+
 # -- images -----------------------------------------------------------------------------------
 
 

@@ -10,6 +10,10 @@
 3. Pose: an upright cube (x, y, z, yaw) is fitted to those points by robust least squares on
    the box's signed distance, from a few starting yaws; cubes are upright in this domain, so
    only the yaw is estimated, and the height is snapped to the stacking levels when close.
+4. Hidden cubes: a cube the camera does not show that holds up a cube it does goes under that
+   cube (a tower's lower cubes, a pyramid's base); one that holds nothing up still is one of
+   the six: it goes where the image allows it, on the table clear of the others and hidden
+   from the camera, as close to the cubes that hide it as can be.
 The noise of a stereo sensor (≈1–2 mm, dropouts at edges) averages out over the hundreds of
 points of each face.
 """
@@ -34,10 +38,20 @@ VAL_MIN = 0.10
 MIN_PIXELS = 10
 WEAK_PIXELS = 1500  # a cube seen by fewer pixels is placed by physics when needed
 # a cube seen by fewer pixels is placed using free space as well (a pyramid's supporters half
-# hidden behind a tower show ~1700–2200 pixels and slide along the faces they show)
-REFINE_PIXELS = 2500
+# hidden behind a tower show ~1700–2200 pixels and slide along the faces they show; a cube
+# beside or behind a tower, one side and part of its top seen, 2600–4100 pixels, and slides
+# 12–21 mm), and a cube seen by at least FIRM_PIXELS (not cut by the border) holds its place
+# against the others' refinement (cubes near the middle of the front camera's view show up to
+# ~11000 pixels, half of them fewer than 5000)
+REFINE_PIXELS = 4500
+FIRM_PIXELS = 2500
 EXPLAINED = 0.003  # a point this close to another cube's surface belongs to that cube [m]
 MAX_POINTS = 500  # per cube, for speed
+# a cube nothing shows goes to a spot on the table hidden from the camera: candidate centres
+# on a grid beside each placed cube (in its frame, up to three cube sides away) [m]
+UNSEEN_STEPS = np.arange(-0.12, 0.12001, 0.005)
+UNSEEN_CLEARANCE = 0.002  # kept from every other cube's footprint [m]
+UNSEEN_MARGIN = 0.005  # a face sample this much behind the observed surface is hidden [m]
 
 
 def _labels(rgb):
@@ -340,6 +354,49 @@ def _repair(fits, placed, half, missing, clouds):
     return placed
 
 
+def _shown(centre, yaw, half, depth, camera):
+    """The fraction of a cube's faces turned to the camera that the depth image shows: samples
+    inside the image that nothing observed lies in front of (a dropout shows nothing)."""
+    K = np.asarray(camera["K"], dtype=float)
+    T = np.asarray(camera["T_world_camera"], dtype=float)
+    samples, normals = _face_samples(half, n=4)
+    c, s = np.cos(yaw), np.sin(yaw)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    world = centre + samples @ Rz.T
+    facing = np.einsum("kj,kj->k", T[:3, 3] - world, normals @ Rz.T) > 0
+    cam = (world - T[:3, 3]) @ T[:3, :3]
+    z = cam[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.round(K[0, 0] * cam[:, 0] / z + K[0, 2])
+        v = np.round(K[1, 1] * cam[:, 1] / z + K[1, 2])
+    h, w = depth.shape
+    inside = facing & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    uc = np.clip(np.nan_to_num(u), 0, w - 1).astype(int)
+    vc = np.clip(np.nan_to_num(v), 0, h - 1).astype(int)
+    observed = depth[vc, uc]
+    shown = inside & (observed > 0) & (observed > z - UNSEEN_MARGIN)
+    return float(shown.sum()) / max(int(facing.sum()), 1)
+
+
+def _unseen_spot(placed, half, depth, camera):
+    """Where a cube the camera does not show at all, and that holds nothing up, stands: on the
+    table, clear of every other cube, where the camera cannot see it (behind the cubes that
+    hide it), as close to them as can be — the nearest of the places the image allows."""
+    best = None
+    for q in sorted(placed.values(), key=lambda q: (q[0], q[1])):
+        c, s = np.cos(q[3]), np.sin(q[3])
+        for a in UNSEEN_STEPS:
+            for b in UNSEEN_STEPS:
+                spot = np.array([q[0] + c * a - s * b, q[1] + s * a + c * b, half, q[3]])
+                if any(_overlap(spot, o, half + UNSEEN_CLEARANCE) for o in placed.values()):
+                    continue
+                far = min(float(np.linalg.norm(spot[:2] - o[:2])) for o in placed.values())
+                key = (_shown(spot[:3], spot[3], half, depth, camera), far)
+                if best is None or key < best[0]:
+                    best = (key, spot)
+    return best[1] if best is not None else np.array([0.0, 0.0, half, 0.0])
+
+
 def perceive(observation, meshes, camera):
     rgb = np.asarray(observation["rgb"], dtype=np.uint8)
     depth = np.asarray(observation["depth"], dtype=np.float32)
@@ -370,7 +427,7 @@ def perceive(observation, meshes, camera):
             firm = [
                 q
                 for n, (q, _, px) in fits.items()
-                if n != name and px >= REFINE_PIXELS and not clouds[n][2]
+                if n != name and px >= FIRM_PIXELS and not clouds[n][2]
             ]
             # points on another cube's surface are colour blends at its edges, not evidence
             keep = np.ones(len(pts), bool)
@@ -388,6 +445,9 @@ def perceive(observation, meshes, camera):
     missing = [n for n in HUES if n not in fits]
     placed = _settle(fits, list(missing), half)
     placed = _repair(fits, placed, half, missing, clouds)
+    for name in missing:  # shown nowhere and holding nothing up: still one of the six
+        if name not in placed:
+            placed[name] = _unseen_spot(placed, half, depth, camera)
     records = []
     for name in HUES:
         if name not in placed:
