@@ -126,7 +126,7 @@ def _level():
 @lru_cache(maxsize=16)
 def _hidden(domain_name: str, seed: int) -> tuple[list[dict], str] | None:
     """(records, id) of `Domain.hidden_scene(seed)` when the scene is valid and its object
-    shows no pixel to the front camera; None otherwise."""
+    shows no pixel to the front camera at full resolution; None otherwise."""
     from sim.settle import check_scene
     from toolbox import render_scene
 
@@ -135,8 +135,11 @@ def _hidden(domain_name: str, seed: int) -> tuple[list[dict], str] | None:
     if drawn is None:
         return None
     recs, behind = records(domain.scene(drawn[0])), drawn[1]
-    mask = render_scene(recs, domain.meshes(), camera(domain, "front", HALF_RES))["mask"]
-    if (mask == [r["id"] for r in recs].index(behind)).any():
+    k = [r["id"] for r in recs].index(behind)
+    small = render_scene(recs, domain.meshes(), camera(domain, "front", HALF_RES))["mask"]
+    if (small == k).any():  # a cheap first look
+        return None
+    if (render_scene(recs, domain.meshes(), camera(domain, "front", 1))["mask"] == k).any():
         return None
     if check_scene(domain, domain.scene(drawn[0])):
         return None

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from toolbox.robot import PLACEMENT
 from toolbox.vision import level_camera_on_table
 
 HUES = {  # catalogue colour → hue [deg] as rendered
@@ -42,7 +43,8 @@ WEAK_PIXELS = 1500  # a cube seen by fewer pixels is placed by physics when need
 # beside or behind a tower, one side and part of its top seen, 2600–4100 pixels, and slides
 # 12–21 mm), and a cube seen by at least FIRM_PIXELS (not cut by the border) holds its place
 # against the others' refinement (cubes near the middle of the front camera's view show up to
-# ~11000 pixels, half of them fewer than 5000)
+# ~11000 pixels, half of them fewer than 5000). Both chosen on our own drawn scenes of a cube
+# behind a tower (`python -m benchmarks.occlusion_bench`, seeds 100–219)
 REFINE_PIXELS = 4500
 FIRM_PIXELS = 2500
 EXPLAINED = 0.003  # a point this close to another cube's surface belongs to that cube [m]
@@ -50,7 +52,9 @@ MAX_POINTS = 500  # per cube, for speed
 # a cube nothing shows goes to a spot on the table hidden from the camera: candidate centres
 # on a grid beside each placed cube (in its frame, up to three cube sides away) [m]
 UNSEEN_STEPS = np.arange(-0.12, 0.12001, 0.005)
-UNSEEN_CLEARANCE = 0.002  # kept from every other cube's footprint [m]
+# every other cube's footprint grown by this on each side must not overlap it (by more than
+# `_overlap`'s 3 mm): the spot keeps at least 1 mm from the others [m]
+UNSEEN_CLEARANCE = 0.002
 UNSEEN_MARGIN = 0.005  # a face sample this much behind the observed surface is hidden [m]
 
 
@@ -381,13 +385,17 @@ def _shown(centre, yaw, half, depth, camera):
 def _unseen_spot(placed, half, depth, camera):
     """Where a cube the camera does not show at all, and that holds nothing up, stands: on the
     table, clear of every other cube, where the camera cannot see it (behind the cubes that
-    hide it), as close to them as can be — the nearest of the places the image allows."""
+    hide it), inside the placement region, as close to them as can be — the nearest of the
+    places the image allows."""
     best = None
     for q in sorted(placed.values(), key=lambda q: (q[0], q[1])):
         c, s = np.cos(q[3]), np.sin(q[3])
         for a in UNSEEN_STEPS:
             for b in UNSEEN_STEPS:
                 spot = np.array([q[0] + c * a - s * b, q[1] + s * a + c * b, half, q[3]])
+                outside = not (PLACEMENT.x[0] <= spot[0] <= PLACEMENT.x[1])
+                if outside or not (PLACEMENT.y[0] <= spot[1] <= PLACEMENT.y[1]):
+                    continue  # the task's scenes keep every object inside PLACEMENT
                 if any(_overlap(spot, o, half + UNSEEN_CLEARANCE) for o in placed.values()):
                     continue
                 far = min(float(np.linalg.norm(spot[:2] - o[:2])) for o in placed.values())

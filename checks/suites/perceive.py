@@ -72,7 +72,9 @@ RULES: tuple[Rule, ...] = (
         "cameras' width and height divided by {checks.inputs:HALF_RES}): silhouette IoU at "
         "least {checks.images:IOU_MIN}, mean IoU at least {checks.images:IOU_MEAN_MIN}, median "
         "depth error at most {checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object "
-        "(objects shown with fewer than {checks.images:MIN_AREA|px} are not scored).",
+        "(objects shown with fewer than {checks.images:MIN_AREA|px} are not scored). An object "
+        "the camera does not show at all that holds nothing up must be drawn with fewer than "
+        "{checks.images:MIN_AREA|px} too: it stands where the camera cannot see it.",
     ),
 )
 
@@ -409,6 +411,13 @@ def rerender(ctx: SuiteContext, renders: Mapping[str, Any], out_dir: Any) -> Che
             bad += 1
             continue
         problems = images.judge(matches)
+        unshown = set(case.get("unscored", ()))
+        problems += [
+            f"'{m.id}': drawn with {m.area_candidate} px where the image shows none of it (an "
+            "object the camera does not show must stand where the camera would not see it)"
+            for m in matches
+            if m.id in unshown and m.area_candidate >= images.MIN_AREA
+        ]
         bad += bool(problems)
         score = images.summary(matches)["iou_mean"] or 0.0
         if worst is None or score < worst[0]:
