@@ -221,10 +221,12 @@ def object_feedback(
 ) -> tuple[list[dict], list[dict[str, str]]]:
     """Per object of an observation: the pose error against the tolerance and the observed
     silhouette against that of `render(perceive(I))`, as report rows and one grid image
-    (wrong objects first)."""
+    (wrong objects first). An object the case leaves unscored (hidden, holding nothing up) is
+    shown as not scored."""
     from sim.score import object_errors
 
     tol = domain.tolerance
+    unscored = set(case.get("unscored", ()))
     errors = {e.id: e for e in object_errors(domain, records, case["truth"])}
     ids = [o["id"] for o in case["truth"]]
     matches: dict[str, images.ObjectMatch] = {}
@@ -236,7 +238,11 @@ def object_feedback(
         except ValueError:
             matches = {}
     rows, tiles = [], []
-    for oid in sorted(ids, key=lambda i: (i in errors and errors[i].within, ids.index(i))):
+
+    def fine(i: str) -> bool:
+        return i in errors and (i in unscored or errors[i].within)
+
+    for oid in sorted(ids, key=lambda i: (fine(i), ids.index(i))):
         e, m = errors.get(oid), matches.get(oid)
         row: dict[str, Any] = {
             "object": oid,
@@ -244,12 +250,16 @@ def object_feedback(
         }
         if tol.rotation is not None:
             row["rotation_error_deg"] = None if e is None else round(np.degrees(e.rotation), 1)
-        row["within_tolerance"] = bool(e is not None and e.within)
+        row["within_tolerance"] = fine(oid)
+        if oid in unscored:
+            row["scored"] = False  # the image cannot say where it stands
         row["silhouette_iou"] = None if m is None else round(m.iou, 3)
         row["pixels_observed"] = None if m is None else m.area_reference
         row["pixels_rendered"] = None if m is None else m.area_candidate
         rows.append(row)
-        if e is None:
+        if oid in unscored:
+            first = "not perceived" if e is None else "hidden: not scored"
+        elif e is None:
             first = "not perceived"
         else:
             first = f"{1000 * e.translation:.1f}/{1000 * tol.translation:g} mm" + (

@@ -155,10 +155,12 @@ def test_a_domain_property_on_a_plan_shows_the_failing_step(tmp_path):
     assert result.images and inside(result.images[0]["path"], tmp_path)
 
 
-def perceive_context(dom, out_dir):
+def perceive_context(dom, out_dir, hidden=0):
     from checks.inputs import build_cases
 
-    budget = Budget(name="one view", observations=((0, "goal", "front"),), hard_observations=0)
+    budget = Budget(
+        name="one view", observations=((0, "goal", "front"),), hard_observations=0, hidden=hidden
+    )
     cases = build_cases(dom, "perceive", budget)
     return SuiteContext(
         function="perceive",
@@ -223,3 +225,43 @@ def test_every_check_of_a_real_report_carries_its_rule(check):
     first = next(c for c in report["checks"] if c["name"] == report["first_failure"])
     assert first["failures"] >= 1 and "examples" in first
     assert f"Rule: {first['rule']}" in report_markdown(report)
+
+
+@pytest.mark.slow
+def test_a_hidden_cube_is_not_scored_for_its_pose_but_the_visible_ones_are(tmp_path):
+    """The hidden scene (`Domain.hidden_scene`): its unseen cube's pose is left out of
+    `property.accuracy` (shown as not scored), every other cube is still held to the
+    tolerance."""
+    from checks.suites import perceive as perceive_suite
+
+    dom = domains.load("cubes")
+    ctx = perceive_context(dom, tmp_path, hidden=1)
+    hidden = next(c for c in ctx.cases["observations"] if c["name"].startswith("hidden/"))
+    (unseen,) = hidden["unscored"]
+
+    def perceived(shift_id):
+        out = {}
+        for case in ctx.cases["observations"]:
+            records = [dict(o, pose=o["pose"].copy()) for o in case["truth"]]
+            for o in records:
+                if case is hidden and o["id"] == shift_id:
+                    o["pose"][0, 3] -= 0.03  # 30 mm farther behind
+            out[case["name"]] = records
+        return out
+
+    ctx.outputs["perceived"] = perceived(unseen)
+    assert perceive_suite.accuracy(ctx, dom).status == "passed"
+
+    seen = next(o["id"] for o in hidden["truth"] if o["id"] != unseen)
+    ctx.outputs["perceived"] = perceived(seen)
+    ctx.outputs["perceived"][hidden["name"]] = [
+        dict(o, pose=o["pose"].copy()) for o in ctx.outputs["perceived"][hidden["name"]]
+    ]
+    for o in ctx.outputs["perceived"][hidden["name"]]:
+        if o["id"] == unseen:
+            o["pose"][0, 3] -= 0.03
+    result = perceive_suite.accuracy(ctx, dom)
+    assert result.status == "failed" and f"'{seen}' is 30.0 mm off" in result.message
+    rows = {r["object"]: r for r in result.objects}
+    assert rows[unseen]["scored"] is False and rows[unseen]["within_tolerance"] is True
+    assert rows[seen]["within_tolerance"] is False
