@@ -70,7 +70,7 @@ class Budget:
             "plan": 12,
             "order": 12,
             "translation": 12,
-            "determinism": 2,
+            "determinism": 4,
             "identity": 3,
         }
     )
@@ -107,7 +107,7 @@ THOROUGH = Budget(
             [(s, c) for s in ("start", "goal") for c in ("front", "view1", "view2")]
         )
     ),
-    examples={"plan": 60, "order": 50, "translation": 50, "determinism": 4, "identity": 8},
+    examples={"plan": 60, "order": 50, "translation": 50, "determinism": 8, "identity": 8},
     hard_observations=3,
     hard_seeds=tuple(range(1, 41)),
     hidden=2,
