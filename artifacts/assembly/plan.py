@@ -117,7 +117,9 @@ def _learn_shapes(meshes):
         _GEOMETRY.clear()
 
 
-FINGER_ROOM = 0.05  # a part moved out of the fingers' way keeps this far from them [m]
+# a part moved out of the fingers' way keeps this far from them: a finger's reach for its own
+# fingers and one for the fingers that need the room [m]
+FINGER_ROOM = 2 * FINGER_REACH
 SLOT_TRIES = 40  # temporary places tried for one that leaves goal places room and the
 # part a grasp onwards to its goal
 
@@ -419,7 +421,7 @@ def _pieces(mesh, T):
 def _outline_gap(a, b):
     """Gap [m] between two convex outlines (k, 2) in order (negative: overlap depth)."""
     lo = np.maximum(a.min(axis=0) - b.max(axis=0), b.min(axis=0) - a.max(axis=0)).max()
-    if lo > 0.05:
+    if lo > FINGER_ROOM:  # farther than any room asked for: the boxes' gap will do
         return float(lo)
     best = -np.inf
     for h in (a, b):

@@ -4,7 +4,7 @@
 """plan(start_state, goal_state, meshes) -> plan: pick-and-place steps that rebuild the goal figure.
 
 Pieces lie flat and turn only about the vertical, so a pose is (x, y, yaw) and a piece is its
-outline (known per mesh key, with the catalogue's 0.25 mm clearance per edge) plus the 16 mm
+outline (from the mesh it receives, per mesh key) plus the 16 mm
 square knob at its centroid, which the gripper takes from above, closing along one of the
 knob's two axes.
 
