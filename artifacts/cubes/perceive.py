@@ -10,10 +10,14 @@
 3. Pose: an upright cube (x, y, z, yaw) is fitted to those points by robust least squares on
    the box's signed distance, from a few starting yaws; cubes are upright in this domain, so
    only the yaw is estimated, and the height is snapped to the stacking levels when close.
+   A barely seen cube is slid to where it explains its points without covering what the
+   image shows behind it (a farther surface, or another cube's colour), at its own yaw or a
+   well-seen neighbour's (a sliver of a top face pins the yaw down little).
 4. Hidden cubes: a cube the camera does not show that holds up a cube it does goes under that
    cube (a tower's lower cubes, a pyramid's base); one that holds nothing up still is one of
    the six: it goes where the image allows it, on the table clear of the others and hidden
-   from the camera, as close to the cubes that hide it as can be.
+   from the camera, as close to the cubes that hide it as can be, in line with one of them
+   at the rows' 6 mm gap when that is hardly farther.
 The noise of a stereo sensor (≈1–2 mm, dropouts at edges) averages out over the hundreds of
 points of each face.
 """
@@ -56,6 +60,12 @@ UNSEEN_STEPS = np.arange(-0.12, 0.12001, 0.005)
 # `_overlap`'s 3 mm): the spot keeps at least 1 mm from the others [m]
 UNSEEN_CLEARANCE = 0.002
 UNSEEN_MARGIN = 0.005  # a face sample this much behind the observed surface is hidden [m]
+UNSEEN_SHOWN = 0.05  # a spot whose faces show this little (noise, dropouts) counts as hidden
+ROW_GAP = 0.006  # the task text: "cubes in a row or a pyramid's base stand 6 mm apart" [m]
+# a pixel showing another cube's colour is that cube's surface: a candidate face in front of
+# it, or level with it within this (depth noise), would hide it [m]
+LABEL_MARGIN = 0.003
+NEIGHBOUR_REACH = 0.12  # a well-seen cube this near a barely seen one lends it its yaw [m]
 
 
 def _labels(rgb):
@@ -189,18 +199,36 @@ def _face_samples(half, n=6):
     return np.concatenate(pts), np.concatenate(normals)
 
 
-def _free_space(p, pts, half, depth, own, camera, firm, others):
+def _free_space(p, pts, half, depth, labels, k, camera, firm, others):
     """Slide a barely seen cube to where it explains its points without hiding what the camera
-    sees behind it (its visible faces must not lie in front of farther observed surfaces).
+    sees behind it (its visible faces must not lie in front of farther observed surfaces, nor
+    cover pixels that show another cube's colour at their depth or beyond: a cube half hidden
+    behind another slides toward its neighbours behind it unless their faces pin it).
 
     Each candidate place rests on the table or on the `others` under it, so a sliver of a
     cube on top of a stack is put on the stack, not in it; it may not overlap a well-seen
-    cube (`firm`) at its own level.
+    cube (`firm`) at its own level. A sliver pins the yaw down little: the turns of the
+    well-seen cubes next to it compete with its own fit (cubes in a row share one).
     """
+
+    def turn(a, b):  # a cube's yaw a - b, wrapped to a quarter turn
+        return (a - b + np.pi / 4) % (np.pi / 2) - np.pi / 4
+
+    yaws = [p[3]]
+    for q in firm:
+        near = np.linalg.norm(q[:2] - p[:2]) < NEIGHBOUR_REACH
+        if near and all(abs(turn(q[3], y)) > 0.05 for y in yaws):
+            yaws.append(p[3] + turn(q[3], p[3]))
+    tried = [_slide([*p[:3], y], pts, half, depth, labels, k, camera, firm, others) for y in yaws]
+    return min(tried, key=lambda scored: scored[0])[1]
+
+
+def _slide(p, pts, half, depth, labels, k, camera, firm, others):
+    """(score, place) of `_free_space` at the yaw p[3]: the best spot near p."""
     K = np.asarray(camera["K"], dtype=float)
     T = np.asarray(camera["T_world_camera"], dtype=float)
     R_cw, t_cw = T[:3, :3].T, -T[:3, :3].T @ T[:3, 3]
-    samples, normals = _face_samples(half)
+    samples, normals = _face_samples(half, n=10)
     c, s = np.cos(p[3]), np.sin(p[3])
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     local_pts, world_n = samples @ Rz.T, normals @ Rz.T
@@ -229,7 +257,10 @@ def _free_space(p, pts, half, depth, own, camera, firm, others):
     inside = visible & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
     uc, vc = np.clip(u, 0, w - 1), np.clip(v, 0, h - 1)
     observed = depth[vc, uc]
-    seen_through = inside & (observed > 0) & (observed > z + 0.008) & ~own[vc, uc]
+    shown = labels[vc, uc]
+    beyond = observed > z + 0.008  # a farther surface shows where the face would be
+    other_cube = (shown >= 0) & (observed > z - LABEL_MARGIN)  # another cube shows there
+    seen_through = inside & (observed > 0) & (shown != k) & (beyond | other_cube)
     violation = seen_through.sum(axis=1) / np.maximum(inside.sum(axis=1), 1)
     cost = np.empty(len(grid))
     for g, (x, y) in enumerate(grid):
@@ -241,8 +272,9 @@ def _free_space(p, pts, half, depth, own, camera, firm, others):
                 np.array([*grid[g], levels[g], p[3]]), q, half
             ):
                 cost[g] += 0.01
-    best = int(np.argmin(cost + 0.004 * violation))
-    return np.array([grid[best][0], grid[best][1], levels[best], p[3]])
+    score = cost + 0.004 * violation
+    best = int(np.argmin(score))
+    return float(score[best]), np.array([grid[best][0], grid[best][1], levels[best], p[3]])
 
 
 def _overlap(a, b, half):
@@ -358,51 +390,80 @@ def _repair(fits, placed, half, missing, clouds):
     return placed
 
 
-def _shown(centre, yaw, half, depth, camera):
-    """The fraction of a cube's faces turned to the camera that the depth image shows: samples
-    inside the image that nothing observed lies in front of (a dropout shows nothing)."""
+def _overlaps(spots, q, half):
+    """`_overlap` of many upright cubes `spots` (n, 4) sharing one yaw with cube q: (n,) bool."""
+    hit = np.ones(len(spots), bool)
+    for yaw in (spots[0, 3], spots[0, 3] + np.pi / 2, q[3], q[3] + np.pi / 2):
+        axis = np.array([np.cos(yaw), np.sin(yaw)])
+        ra = half * (abs(np.cos(spots[0, 3] - yaw)) + abs(np.sin(spots[0, 3] - yaw)))
+        rb = half * (abs(np.cos(q[3] - yaw)) + abs(np.sin(q[3] - yaw)))
+        hit &= np.abs(spots[:, :2] @ axis - q[:2] @ axis) <= ra + rb - 0.003
+    return hit
+
+
+def _shown(centres, yaw, half, depth, camera):
+    """Per centre (n, 3): the fraction of a cube's faces turned to the camera that the depth
+    image shows, samples inside the image that nothing observed lies in front of (a dropout
+    shows nothing); the cubes share the yaw."""
     K = np.asarray(camera["K"], dtype=float)
     T = np.asarray(camera["T_world_camera"], dtype=float)
     samples, normals = _face_samples(half, n=4)
     c, s = np.cos(yaw), np.sin(yaw)
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    world = centre + samples @ Rz.T
-    facing = np.einsum("kj,kj->k", T[:3, 3] - world, normals @ Rz.T) > 0
+    world = centres[:, None, :] + (samples @ Rz.T)[None]  # (n, k, 3)
+    facing = np.einsum("nkj,kj->nk", T[:3, 3] - world, normals @ Rz.T) > 0
     cam = (world - T[:3, 3]) @ T[:3, :3]
-    z = cam[:, 2]
+    z = cam[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.round(K[0, 0] * cam[:, 0] / z + K[0, 2])
-        v = np.round(K[1, 1] * cam[:, 1] / z + K[1, 2])
+        u = np.round(K[0, 0] * cam[..., 0] / z + K[0, 2])
+        v = np.round(K[1, 1] * cam[..., 1] / z + K[1, 2])
     h, w = depth.shape
     inside = facing & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
     uc = np.clip(np.nan_to_num(u), 0, w - 1).astype(int)
     vc = np.clip(np.nan_to_num(v), 0, h - 1).astype(int)
     observed = depth[vc, uc]
     shown = inside & (observed > 0) & (observed > z - UNSEEN_MARGIN)
-    return float(shown.sum()) / max(int(facing.sum()), 1)
+    return shown.sum(axis=1) / np.maximum(facing.sum(axis=1), 1)
 
 
 def _unseen_spot(placed, half, depth, camera):
     """Where a cube the camera does not show at all, and that holds nothing up, stands: on the
     table, clear of every other cube, where the camera cannot see it (behind the cubes that
-    hide it), inside the placement region, as close to them as can be — the nearest of the
-    places the image allows."""
-    best = None
-    for q in sorted(placed.values(), key=lambda q: (q[0], q[1])):
+    hide it), inside the placement region, as close to the placed cubes as can be — or in line
+    with one of them at the rows' pitch when that is hidden and hardly farther (a goal's rows
+    and pyramid bases stand `ROW_GAP` apart): the nearest of the places the image allows."""
+    pitch = 2 * half + ROW_GAP
+    rows = np.arange(-2, 3) * pitch  # a level-0 cube's row neighbours: whole pitches
+    halves = (np.arange(-2, 2) + 0.5) * pitch  # an upper cube's supporters: half pitches
+    others = list(placed.values())
+    found = []  # (spots (n, 4), on a row (n,), shown (n,), distance to the nearest cube (n,))
+    for q in others:
+        on_row = rows if q[2] < 2 * half else halves
+        steps = [(a, b, False) for a in UNSEEN_STEPS for b in UNSEEN_STEPS]
+        steps += [(a, b, True) for a in on_row for b in on_row]
+        a, b, row = (np.array(v) for v in zip(*steps, strict=True))
         c, s = np.cos(q[3]), np.sin(q[3])
-        for a in UNSEEN_STEPS:
-            for b in UNSEEN_STEPS:
-                spot = np.array([q[0] + c * a - s * b, q[1] + s * a + c * b, half, q[3]])
-                outside = not (PLACEMENT.x[0] <= spot[0] <= PLACEMENT.x[1])
-                if outside or not (PLACEMENT.y[0] <= spot[1] <= PLACEMENT.y[1]):
-                    continue  # the task's scenes keep every object inside PLACEMENT
-                if any(_overlap(spot, o, half + UNSEEN_CLEARANCE) for o in placed.values()):
-                    continue
-                far = min(float(np.linalg.norm(spot[:2] - o[:2])) for o in placed.values())
-                key = (_shown(spot[:3], spot[3], half, depth, camera), far)
-                if best is None or key < best[0]:
-                    best = (key, spot)
-    return best[1] if best is not None else np.array([0.0, 0.0, half, 0.0])
+        spots = np.c_[q[0] + c * a - s * b, q[1] + s * a + c * b]
+        spots = np.c_[spots, np.full(len(a), half), np.full(len(a), q[3])]
+        # the task's scenes keep every object inside PLACEMENT
+        ok = (PLACEMENT.x[0] <= spots[:, 0]) & (spots[:, 0] <= PLACEMENT.x[1])
+        ok &= (PLACEMENT.y[0] <= spots[:, 1]) & (spots[:, 1] <= PLACEMENT.y[1])
+        for o in others:
+            ok &= ~_overlaps(spots, o, half + UNSEEN_CLEARANCE)
+        if ok.any():
+            spots, row = spots[ok], row[ok]
+            far = np.min([np.linalg.norm(spots[:, :2] - o[:2], axis=1) for o in others], axis=0)
+            found.append((spots, row, _shown(spots[:, :3], q[3], half, depth, camera), far))
+    if not found:
+        return np.array([0.0, 0.0, half, 0.0])
+    spots, row, shown, far = (np.concatenate(v) for v in zip(*found, strict=True))
+    hidden = shown <= UNSEEN_SHOWN
+    if not hidden.any():
+        return spots[int(np.lexsort((far, shown))[0])]
+    nearest = far[hidden].min()
+    in_line = hidden & row & (far <= nearest + ROW_GAP)
+    pick = in_line if in_line.any() else hidden
+    return spots[pick][int(np.argmin(far[pick]))]
 
 
 def perceive(observation, meshes, camera):
@@ -448,7 +509,7 @@ def perceive(observation, meshes, camera):
                 pts = pts[keep]
                 p, top = _fit(pts, half, eye)
             others = [q for n, (q, _, _) in fits.items() if n != name]
-            p = _free_space(p, pts, half, depth, labels == k, camera, firm, others)
+            p = _free_space(p, pts, half, depth, labels, k, camera, firm, others)
             fits[name] = (p, top, pixels)
     missing = [n for n in HUES if n not in fits]
     placed = _settle(fits, list(missing), half)

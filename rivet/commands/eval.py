@@ -6,7 +6,7 @@ Policies: `oracle` (ground truth + the generator's construction order: the execu
 hash-checked programs of artifacts/DOMAIN), `runs RUNS_DIR` (a reliability study: each
 authoring run's final programs under RUNS_DIR on the first `--pairs K` pairs, per run and
 pooled; sim/reliability.py). Trials come from the fixed benchmark set
-(20 goals × 3 starts) unless `--seed` or `--instances` says otherwise.
+(20 goals × 3 starts) unless `--seed`, `--composed` or `--instances` says otherwise.
 """
 
 from __future__ import annotations
@@ -51,6 +51,8 @@ def _instances(domain, args: argparse.Namespace) -> list[dict]:
             d["name"] = d.get("name") or f.stem
             out.append(d)
         return out[: args.trials] if args.trials else out
+    if args.composed is not None:
+        return _composed(domain, args.composed, args.trials or 60)
     if args.seed is not None:
         n = args.trials or 60
         from sim.settle import physical_problems
@@ -63,6 +65,22 @@ def _instances(domain, args: argparse.Namespace) -> list[dict]:
     # start-major order, so that a short run still covers many goals
     ordered = sorted(bench, key=lambda i: (i.name.split("_start")[-1], i.name))
     return [i.to_dict() for i in ordered[: args.trials or len(ordered)]]
+
+
+def _composed(domain, seed: int, n: int) -> list[dict]:
+    """`n` instances of goals composed from the task text's parts outside every catalogue
+    (`Domain.composed_instance`: never the test split's families), from seeds `seed`, `seed` + 1,
+    … (a seed without a scene or an executable order is skipped)."""
+    out: list[dict] = []
+    for s in range(seed, seed + 50 * n):
+        inst = domain.composed_instance(s)
+        if inst is not None:
+            out.append(inst.to_dict())
+            if len(out) == n:
+                return out
+        elif not out and s - seed >= 49:
+            raise UsageError(f"--composed: {domain.name} composes no goals (seeds {seed}–{s})")
+    raise UsageError(f"--composed {seed}: only {len(out)} of {n} seeds gave an instance")
 
 
 def protocol_of(args: argparse.Namespace):
@@ -154,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
     if (
         _policy(args.policy)[0] == "artifacts"
         and args.seed is None
+        and args.composed is None
         and not args.instances
         and not args.trials
         and args.split == "dev"
@@ -224,6 +243,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="a fresh generated set of --split's goal and start families from seeds S, S+1, … "
         "instead of the benchmark",
+    )
+    p.add_argument(
+        "--composed",
+        type=int,
+        default=None,
+        metavar="SEED",
+        help="goals composed from the task text's parts outside every catalogue (dev-side, never "
+        "the test families) from seeds S, S+1, …, starts drawn as dev starts",
     )
     p.add_argument(
         "--instances",

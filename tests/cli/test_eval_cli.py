@@ -43,15 +43,15 @@ def test_every_view_summary_names_the_evaluated_set(tmp_path):
         assert summary["set_hash"] == manifest["set_hash"]
 
 
-def test_a_fresh_seed_draws_from_the_split_asked_for(tmp_path):
-    """`--seed S --split test` runs fresh test-split instances (named test/seedS), not dev ones,
-    and a fresh set, even from seed 0, never writes the set's benchmark figures (eval.json)."""
+def _one_oracle_trial(tmp_path, *options: str) -> list[str]:
+    """Names of the trials `rivet eval cubes --policy oracle OPTIONS --trials 1` ran; asserts
+    that the run left the set's benchmark figures (eval.json) alone."""
     out = tmp_path / "eval.json"
     eval_json = REPO / "artifacts" / "cubes" / "eval.json"
     before = eval_json.read_bytes() if eval_json.is_file() else None
     proc = subprocess.run(
         [
-            *(RIVET, "eval", "cubes", "--policy", "oracle", "--split", "test", "--seed", "0"),
+            *(RIVET, "eval", "cubes", "--policy", "oracle", *options),
             *("--trials", "1", "--quiet", "--json", str(out)),
         ],
         capture_output=True,
@@ -60,6 +60,26 @@ def test_a_fresh_seed_draws_from_the_split_asked_for(tmp_path):
         cwd=REPO,
     )
     assert proc.returncode in (0, 1), proc.stderr[-2000:]
-    summary = json.loads(out.read_text())
-    assert [t["name"] for t in summary["per_trial"]] == ["test/seed0"]
     assert (eval_json.read_bytes() if eval_json.is_file() else None) == before
+    return [t["name"] for t in json.loads(out.read_text())["per_trial"]]
+
+
+def test_a_fresh_seed_draws_from_the_split_asked_for(tmp_path):
+    """`--seed S --split test` runs fresh test-split instances (named test/seedS), not dev ones,
+    and a fresh set, even from seed 0, never writes the set's benchmark figures (eval.json)."""
+    assert _one_oracle_trial(tmp_path, "--split", "test", "--seed", "0") == ["test/seed0"]
+
+
+def test_composed_goals_run_as_instances_and_a_domain_without_a_composer_is_refused(tmp_path):
+    """`--composed S` runs goals composed outside every catalogue (named composed/seedS, the
+    first seeds that give an instance) and never writes the benchmark figures; a domain with no
+    composer exits 2 saying so."""
+    assert _one_oracle_trial(tmp_path, "--composed", "2000") == ["composed/seed2000"]
+    proc = subprocess.run(
+        [RIVET, "eval", "tangram", "--policy", "oracle", "--composed", "1", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
+    assert proc.returncode == 2 and "tangram composes no goals" in proc.stderr
