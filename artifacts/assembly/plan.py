@@ -57,7 +57,7 @@ from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP, RESTING_GAP, TOU
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
 # a part perceived within the perceived states' slack of its goal pose counts as placed [m]
 SAME = PERCEIVED_GAP
-TILT = np.radians(20.0)  # a goal orientation farther than this from every resting pose
+TILT = np.radians(20.0)  # our choice: a goal turned farther from every resting pose is refused
 # perceived states hold parts up to PERCEIVED_OVERLAP into one another (toolbox.stability):
 # goal parts may overlap that much, and a part still to move that comes that near a place may
 # in truth stand in it; a placement may touch others TOUCHING deep
@@ -80,6 +80,11 @@ CLEARANCES = (
 # a part farther than this from another's box cannot take a grasp of it [m]
 HAND_SPAN = MAX_OPENING + 2 * FINGER_DEPTH
 SLIVER = 0.0002  # outlines overlapping deeper than this are above one another (not rounding) [m]
+# our own choices, no fact of the task's: supports farther below a goal part than this are not
+# looked for (the "floats" reason then names its height above the table) [m], and a temporary
+# place moves a part at least this far (nearer is where it stands) [m]
+SUPPORT_SEARCH = 0.02
+MIN_SHIFT = 0.02
 
 
 # symmetries from the task: (kind, order about z, half height for the flip)
@@ -252,7 +257,7 @@ def _snap_goal(goal, mesh):
         T = snapped[i]
         drop = _lowest(mesh[i], T)  # down to the table
         for j, U in placed.items():
-            gap, axis = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], U, cutoff=0.02)
+            gap, axis = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], U, cutoff=SUPPORT_SEARCH)
             if axis[2] >= VERTICAL and -PERCEIVED_OVERLAP <= gap < drop:
                 drop = gap
         if drop > ON_GAP:
@@ -320,11 +325,12 @@ class _World:
         )
 
 
-_HANDS = {}  # mesh keys → the robot's hand model for those meshes
+_HANDS = {}  # (mesh key, content hash) pairs → the robot's hand model for those meshes
 
 
 def _hand(meshes):
-    key = tuple(sorted(meshes))
+    _learn_shapes(meshes)
+    key = tuple(sorted((k, _MESH_HASH[k]) for k in meshes))
     if key not in _HANDS:
         _HANDS[key] = Hand(meshes, {k: _symmetries(k) for k in meshes})
     return _HANDS[key]
@@ -493,7 +499,7 @@ def _temporary(world, i, pending, keep=(), poor_place=None, accept=None):
     goals = [_footprint(world.mesh[j], G) for j, G in pending]
     to_goals = _gaps(hull, goals, shifts).min(axis=1, initial=np.inf)
     to_keep = _gaps(hull, list(keep), shifts).min(axis=1, initial=np.inf)
-    moved = np.linalg.norm(shifts, axis=1) >= 0.02  # a place, not where it stands
+    moved = np.linalg.norm(shifts, axis=1) >= MIN_SHIFT  # a place, not where it stands
     for clearance, goal_clearance in CLEARANCES:
         ok = inside & moved & (to_parts >= clearance) & (to_goals >= goal_clearance)
         ok &= to_keep >= max(goal_clearance, FINGER_ROOM if clearance >= CLEARANCES[0][0] else 0)
