@@ -237,13 +237,12 @@ def _slide(p, pts, half, depth, labels, k, camera, firm, others):
     # at least the level its points show: what holds it up may be hidden
     levels = np.full(len(grid), half + 2 * half * max(0, round((p[2] - half) / (2 * half))))
     top = float(np.percentile(pts[:, 2], 98))
+    spots = np.c_[grid, levels, np.full(len(grid), p[3])]  # (g, 4)
     for q in sorted(others, key=lambda q: q[2]):
         if q[2] + half > top - 0.005:
             continue  # not below what is seen of this cube: it cannot hold it up
-        near = np.linalg.norm(grid - q[:2], axis=1) < 4 * half
-        for g in np.nonzero(near)[0]:
-            if _overlap(np.array([*grid[g], levels[g], p[3]]), q, half):
-                levels[g] = max(levels[g], q[2] + 2 * half)
+        on_it = _overlaps(spots, q, half)
+        levels[on_it] = np.maximum(levels[on_it], q[2] + 2 * half)
     centres = np.c_[grid, levels]  # (g, 3)
     world = centres[:, None, :] + local_pts[None]  # (g, k, 3)
     eye = T[:3, 3]
@@ -262,16 +261,14 @@ def _slide(p, pts, half, depth, labels, k, camera, firm, others):
     other_cube = (shown >= 0) & (observed > z - LABEL_MARGIN)  # another cube shows there
     seen_through = inside & (observed > 0) & (shown != k) & (beyond | other_cube)
     violation = seen_through.sum(axis=1) / np.maximum(inside.sum(axis=1), 1)
-    cost = np.empty(len(grid))
-    for g, (x, y) in enumerate(grid):
-        r = np.abs(_residuals((x, y, levels[g], p[3]), pts, half))
-        cost[g] = np.mean(np.minimum(r, 0.005))
-    for q in firm:
-        for g in np.nonzero(np.linalg.norm(grid - q[:2], axis=1) < 4 * half)[0]:
-            if abs(q[2] - levels[g]) < half and _overlap(
-                np.array([*grid[g], levels[g], p[3]]), q, half
-            ):
-                cost[g] += 0.01
+    # the points' distances to the cube at each candidate (`_residuals`, all at once)
+    d = pts[None, :, :] - centres[:, None, :]  # (g, n, 3)
+    local = np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]], -1)
+    q = np.abs(local) - half
+    r = np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
+    cost = np.mean(np.minimum(np.abs(r), 0.005), axis=1)
+    for f in firm:
+        cost[(np.abs(f[2] - levels) < half) & _overlaps(spots, f, half)] += 0.01
     score = cost + 0.004 * violation
     best = int(np.argmin(score))
     return float(score[best]), np.array([grid[best][0], grid[best][1], levels[best], p[3]])
@@ -454,8 +451,8 @@ def _unseen_spot(placed, half, depth, camera):
             spots, row = spots[ok], row[ok]
             far = np.min([np.linalg.norm(spots[:, :2] - o[:2], axis=1) for o in others], axis=0)
             found.append((spots, row, _shown(spots[:, :3], q[3], half, depth, camera), far))
-    if not found:
-        return np.array([0.0, 0.0, half, 0.0])
+    if not found:  # no cube seen, or no room near them: the middle of the placement region
+        return np.array([np.mean(PLACEMENT.x), np.mean(PLACEMENT.y), half, 0.0])
     spots, row, shown, far = (np.concatenate(v) for v in zip(*found, strict=True))
     hidden = shown <= UNSEEN_SHOWN
     if not hidden.any():

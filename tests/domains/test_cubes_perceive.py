@@ -116,3 +116,24 @@ def test_composed_goals_are_perceived_with_their_relations(perceive, seed):
     records = perceive(goal, domain.meshes(), goal["camera"])
     score = state_accuracy(domain, records, instance.goal)
     assert score.correct, (score.missing_edges, score.extra_edges, score.objects)
+
+
+def test_a_view_that_shows_no_cube_still_reports_six_apart_in_the_placement_region(perceive):
+    """No cube's colour anywhere in the image (a grey picture of the table): the six cubes are
+    still reported, on the table, inside the region the task's scenes keep to and apart from
+    one another (before, all six went to the robot's base at the origin)."""
+    from toolbox.robot import PLACEMENT
+
+    domain = domains.load("cubes")
+    obs, _ = observe_with_truth(domain, _scene(domain, behind=0.006), "front", realism="default")
+    grey = np.full_like(obs["rgb"], 128)
+    records = perceive({**obs, "rgb": grey}, domain.meshes(), obs["camera"])
+    at = {r["id"]: np.asarray(r["pose"], float)[:3, 3] for r in records}
+    assert len(at) == 6
+    for oid, p in at.items():
+        assert PLACEMENT.x[0] <= p[0] <= PLACEMENT.x[1] and PLACEMENT.y[0] <= p[1] <= PLACEMENT.y[1]
+        assert p[2] == pytest.approx(HALF, abs=1e-3), oid
+    ids = sorted(at)
+    for i, a in enumerate(ids):
+        for b in ids[i + 1 :]:
+            assert np.abs(at[a][:2] - at[b][:2]).max() >= 2 * HALF - 1e-3, (a, b)
