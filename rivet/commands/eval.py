@@ -33,6 +33,9 @@ def _policy(values: list[str]) -> tuple[str, str | None]:
 
 
 def _instances(domain, args: argparse.Namespace) -> list[dict]:
+    chosen = [o for o, v in (("--seed", args.seed), ("--composed", args.composed)) if v is not None]
+    if len(chosen) + bool(args.instances) > 1:
+        raise UsageError(f"{', '.join(chosen + ['--instances'] * bool(args.instances))}: pick one")
     if args.instances:
         from sim.scene import load_instance
 

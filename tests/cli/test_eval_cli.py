@@ -73,7 +73,7 @@ def test_a_fresh_seed_draws_from_the_split_asked_for(tmp_path):
 def test_composed_goals_run_as_instances_and_a_domain_without_a_composer_is_refused(tmp_path):
     """`--composed S` runs goals composed outside every catalogue (named composed/seedS, the
     first seeds that give an instance) and never writes the benchmark figures; a domain with no
-    composer exits 2 saying so."""
+    composer exits 2 saying so, and so does `--composed` beside `--seed`."""
     assert _one_oracle_trial(tmp_path, "--composed", "2000") == ["composed/seed2000"]
     proc = subprocess.run(
         [RIVET, "eval", "tangram", "--policy", "oracle", "--composed", "1", "--quiet"],
@@ -83,3 +83,11 @@ def test_composed_goals_run_as_instances_and_a_domain_without_a_composer_is_refu
         cwd=REPO,
     )
     assert proc.returncode == 2 and "tangram composes no goals" in proc.stderr
+    proc = subprocess.run(
+        [RIVET, "eval", "cubes", "--policy", "oracle", "--seed", "1", "--composed", "1"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
+    assert proc.returncode == 2 and "--seed, --composed: pick one" in proc.stderr
