@@ -64,17 +64,32 @@ SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "square": 4,
     "parallelogram": 2,
 }
-KNOB = 0.016  # the square knob's side (the task text: "a 16 mm square knob") [m]
-KNOB_HALF = KNOB / 2
-# the jaws around a knob with neighbours close by: the smaller approach clearance per side
-OPENING = 2 * KNOB_HALF + 2 * JAW_CLEARANCES[-1]
+# the knob (the task text: a square knob at the centroid), its half side read from the top of
+# the meshes `plan` receives (`_learn_knob`), and what follows from it: the jaws around a knob
+# with neighbours close by (the smaller approach clearance per side), and the farthest another
+# knob's centre can be from this knob's and still touch the open fingers around it (a
+# fingertip's far corner, `toolbox.finger_footprints`, and the knob's half diagonal) [m]
+KNOB_HALF = OPENING = KNOB_REACH = None
 FINGER_MARGIN = GRASP_MARGINS[-1]  # the least clearance the hand keeps around its fingers [m]
-# the farthest another knob's centre can be from this knob's and still touch the open fingers
-# around it: a fingertip's far corner (`toolbox.finger_footprints`) and the knob's half diagonal
-KNOB_REACH = float(
-    np.hypot(OPENING / 2 + FINGER_DEPTH + FINGER_MARGIN, FINGER_WIDTH / 2 + FINGER_MARGIN)
-    + np.sqrt(2) * KNOB_HALF
-)
+
+
+def _learn_knob(meshes):
+    global KNOB_HALF, OPENING, KNOB_REACH
+    tops = []
+    for key, mesh in meshes.items():
+        if key in SYMMETRY:
+            v = np.asarray(mesh.vertices, dtype=float)
+            tops.append(np.abs(v[v[:, 2] > v[:, 2].max() - 1e-5, :2]).max())
+    if not tops:
+        return  # no piece this plan knows: it answers "infeasible" naming the mesh
+    KNOB_HALF = float(max(tops))
+    OPENING = 2 * KNOB_HALF + 2 * JAW_CLEARANCES[-1]
+    KNOB_REACH = float(
+        np.hypot(OPENING / 2 + FINGER_DEPTH + FINGER_MARGIN, FINGER_WIDTH / 2 + FINGER_MARGIN)
+        + np.sqrt(2) * KNOB_HALF
+    )
+
+
 # the domain's tolerance (the prompt's "Tolerances": 5 mm and 5°): a goal piece perceived
 # within it of lying flat on the table is on the table
 TOLERANCE_M, TOLERANCE_RAD = 0.005, np.radians(5.0)
@@ -296,6 +311,7 @@ def plan(start_state, goal_state, meshes):
     for key, mesh in meshes.items():
         if key in SYMMETRY and key not in OUTLINES:
             OUTLINES[key] = _outline(mesh)
+    _learn_knob(meshes)
     start_recs = {str(r["id"]): r for r in start_state["objects"]}
     goal_recs = {str(r["id"]): r for r in goal_state["objects"]}
     if sorted(start_recs) != sorted(goal_recs):

@@ -80,22 +80,21 @@ CLEARANCES = (
 # a part farther than this from another's box cannot take a grasp of it [m]
 HAND_SPAN = MAX_OPENING + 2 * FINGER_DEPTH
 SLIVER = 0.0002  # outlines overlapping deeper than this are above one another (not rounding) [m]
-# our own choices, no fact of the task's: supports farther below a goal part than this are not
-# looked for (the "floats" reason then names its height above the table) [m], and a temporary
-# place moves a part at least this far (nearer is where it stands) [m]
-SUPPORT_SEARCH = 0.02
-MIN_SHIFT = 0.02
+# a temporary place moves a part at least two and a half grid steps (nearer is where it
+# stands; our own choice) [m]
+MIN_SHIFT = 2.5 * GRID
 
 
-# symmetries from the task: (kind, order about z, half height for the flip)
+# symmetries from the task: (kind, order about z); a part that looks the same upside down
+# turns over about its middle, found from the mesh `plan` receives (`FLIP_Z`)
 SYMMETRY = {
-    "pillar": ("dihedral", 4, 0.08 / 2),
-    "beam": ("dihedral", 2, 0.02 / 2),
-    "block": ("dihedral", 2, 0.03 / 2),
-    "arch": ("cyclic", 2, 0.0),
-    "roof": ("cyclic", 2, 0.0),
-    "cylinder": ("revolution", 0, 0.06 / 2),
-    "lblock": ("identity", 1, 0.0),
+    "pillar": ("dihedral", 4),
+    "beam": ("dihedral", 2),
+    "block": ("dihedral", 2),
+    "arch": ("cyclic", 2),
+    "roof": ("cyclic", 2),
+    "cylinder": ("revolution", 0),
+    "lblock": ("identity", 1),
 }
 # each part's shape is cut from the mesh `plan` receives into exact convex pieces
 # (`Shape.from_mesh`: the arch into its legs and the slabs over its opening, the L-block into
@@ -105,6 +104,7 @@ SYMMETRY = {
 SHAPES = {}  # mesh key → Shape
 REST = {}  # mesh key → rotations (3, 3) of its resting poses
 SAME_ANGLE = {}  # mesh key → [rad]
+FLIP_Z = {}  # mesh key → its lowest plus highest z: turned over about its middle, z → FLIP_Z - z
 _MESH_HASH = {}  # mesh key → content hash of the mesh its shape was cut from
 
 
@@ -119,6 +119,7 @@ def _learn_shapes(meshes):
         SHAPES[k], _MESH_HASH[k] = s, digest
         REST[k] = [p.rotation for p in stable_poses(s)]
         SAME_ANGLE[k] = SAME / float(np.linalg.norm(np.concatenate(s.pieces), axis=1).max())
+        FLIP_Z[k] = float(v[:, 2].min() + v[:, 2].max())
         _GEOMETRY.clear()
 
 
@@ -142,13 +143,13 @@ def _pose(R, t):
 
 def _symmetries(mesh, yaw_free=0.0):
     """Object-frame transforms (4, 4) under which the part looks the same."""
-    kind, n, half = SYMMETRY.get(mesh, ("identity", 1, 0.0))
+    kind, n = SYMMETRY.get(mesh, ("identity", 1))
     if kind == "identity":
         return [np.eye(4)]
     turns = [yaw_free] if kind == "revolution" else [2 * np.pi * k / n for k in range(n)]
     out = [_pose(_rz(a), np.zeros(3)) for a in turns]
     if kind in ("dihedral", "revolution"):  # also upside down, about the centre
-        flip = _pose(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 2 * half])
+        flip = _pose(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, FLIP_Z[mesh]])
         out += [T @ flip for T in out]
     return out
 
@@ -257,7 +258,7 @@ def _snap_goal(goal, mesh):
         T = snapped[i]
         drop = _lowest(mesh[i], T)  # down to the table
         for j, U in placed.items():
-            gap, axis = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], U, cutoff=SUPPORT_SEARCH)
+            gap, axis = separation(SHAPES[mesh[i]], T, SHAPES[mesh[j]], U, cutoff=ON_GAP)
             if axis[2] >= VERTICAL and -PERCEIVED_OVERLAP <= gap < drop:
                 drop = gap
         if drop > ON_GAP:
