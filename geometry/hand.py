@@ -930,21 +930,25 @@ class MoveCheck:
 
     def _above(self, mesh: str, T: np.ndarray, near: tuple, pool: Mapping) -> list[str]:
         """Neighbours in the vertical sweep of the object's convex parts above pose `T`."""
-        touch = TOLERANCES.sweep_touch
+        touch, clear = TOLERANCES.sweep_touch, TOLERANCES.sweep_clearance
         lo, hi = self._box(mesh, T)
         swept: Body | None = None
         out = []
         for j, m, _ in near:
             lo_j, hi_j = self._box(m, pool[j][1])
+            # a neighbour wholly over the object (an overhang) must clear its sweep: the object
+            # passes under its edge; one beside it may touch the sweep (it stands next to it)
+            need = clear if lo_j[2] >= hi[2] else -touch
+            reach = max(need, touch)
             # a neighbour beside the object's outline, or wholly below it, is not above it
-            if np.any(lo_j[:2] > hi[:2] + touch) or np.any(hi_j[:2] < lo[:2] - touch):
+            if np.any(lo_j[:2] > hi[:2] + reach) or np.any(hi_j[:2] < lo[:2] - reach):
                 continue
             if hi_j[2] < lo[2]:
                 continue
             if swept is None:
                 swept = self._sweep(mesh, T)
             body = place(j, self.parts[m], pool[j][1])
-            if body_separation(swept, body, cutoff=touch)[0] < -touch:
+            if body_separation(swept, body, cutoff=reach)[0] < need:
                 out.append(j)
         return out
 

@@ -43,6 +43,12 @@ class Tolerances:
     """[m] penetration of an object's vertical sweep (it rises straight up from the pick and
     comes straight down onto the place) still counted as touching, not hitting."""
 
+    sweep_clearance: float = 0.002
+    """[m] clearance an object's vertical sweep keeps from a neighbour wholly above it (one
+    overhanging the pick or the place: the object passes under its edge): the held object
+    sways by up to a millimetre in the hand and the arm tracks to about a millimetre
+    (`grasp_margins`), so touching, as `sweep_touch` allows beside it, would knock it."""
+
     face_vertical: float = float(np.radians(3.0))
     """[rad] tilt within which a mesh face counts as vertical for the 2F-85's pads."""
 

@@ -11,7 +11,8 @@ turns it only about the vertical, lowers it straight down onto the target and op
   object — at the pick, among the objects as they are before the step, and at the place,
   among them as they are after it (the jaws open a few millimetres beyond the object on each
   side; the fingertips stay 3 mm above what the object stands on);
-- nothing above the object at the pick or the place (it rises and descends vertically);
+- nothing above the object at the pick or the place: its vertical sweep keeps `SWEEP_CLEARANCE`
+  from an overhang, and may touch a neighbour beside it `SWEEP_TOUCH` deep;
 - a target that differs from the current pose only by a turn about the vertical (modulo the
   object's symmetry);
 - both ends inside `WORKSPACE`, every point of the object (the arm reaches them top-down).
@@ -27,11 +28,10 @@ they open `JAW_CLEARANCES[0]` beyond the gripped width on each side, or `JAW_CLE
 neighbour is too close for that (`toolbox.finger_footprints` draws the open fingers from above for
 such an opening; each fingertip reaches `FINGER_DEPTH` outwards from its pad and is `FINGER_WIDTH`
 wide), and the hand keeps `GRASP_MARGINS[0]` from every neighbour, or `GRASP_MARGINS[1]` where no
-grasp has that much room; a held object's sweep may touch others `SWEEP_TOUCH` deep, and a tilt
-under `YAW_ONLY` [rad] is a turn about the vertical. The held object turns with the arm's last
-joint, whose range is `WRIST_RANGE`: between the pick and the place the wrist turns by the object's
-turn, so a grasp that leaves the wrist near one end of its range cannot make a long turn that way;
-a grasp half a turn from it may. Records and poses are as in `toolbox.stability`.
+grasp has that much room, and a tilt under `YAW_ONLY` [rad] is a turn about the vertical. The
+held object turns with the arm's last joint (range `WRIST_RANGE`) by the object's turn, so a grasp
+that leaves the wrist near one end of its range cannot make a long turn that way; a grasp half a
+turn from it may. Records and poses are as in `toolbox.stability`.
 """
 
 from __future__ import annotations
@@ -64,6 +64,7 @@ __all__ = [
     "MAX_OPENING",
     "PLACEMENT",
     "PLACEMENT_SPREAD",
+    "SWEEP_CLEARANCE",
     "SWEEP_TOUCH",
     "WORKSPACE",
     "WRIST_RANGE",
@@ -82,6 +83,7 @@ FINGER_DEPTH = FingerModel().segments[0][2]
 FINGER_WIDTH = 2 * FingerModel().segments[0][3]
 GRASP_MARGINS = TOLERANCES.grasp_margins  # [m] gripper to neighbours, larger preferred
 SWEEP_TOUCH = TOLERANCES.sweep_touch  # [m] the held object's sweep may touch others this deep
+SWEEP_CLEARANCE = TOLERANCES.sweep_clearance  # [m] from the sweep to an overhang
 YAW_ONLY = TOLERANCES.yaw_only  # [rad] tilt within which a turn is one about the vertical
 WRIST_RANGE = (-3.0159, 3.0159)  # [rad] the FR3's last joint (the flange about the tool axis)
 

@@ -103,3 +103,32 @@ def test_nothing_may_hang_above_a_pick_or_a_place():
     over_target = {"beam": ("beam", yaw_pose(0.5, 0.3, 0.08, 0.0))}
     verdict = assembly.grasps.move("roof", "roof", roof, target, {}, over_target)
     assert not verdict.ok and "at the place" in verdict.reason
+
+
+def test_an_overhang_must_clear_the_sweep_a_neighbour_beside_may_touch_it():
+    # the L-block brushing the edge of a block that overhangs its place knocked the block's
+    # pillar over (a dev-goal instance from a cluttered start); beside the place, touching is
+    # what adjacent parts do
+    from geometry import TOLERANCES
+
+    assembly = domains.load("assembly")
+    x_max = float(np.asarray(assembly.mesh("block").vertices)[:, 0].max())  # the block's +x end
+    beam_half = float(np.asarray(assembly.mesh("beam").vertices)[:, 0].max())
+    block = yaw_pose(0.5, 0.0, 0.0, 0.0)
+    here = yaw_pose(0.5, 0.2, 0.0, 0.0)
+
+    def beam_at(gap: float, z: float) -> dict:
+        # the beam along x, its -x end `gap` beyond the block's +x end at the place
+        return {"beam": ("beam", yaw_pose(0.5 + x_max + gap + beam_half, 0.0, z, 0.0))}
+
+    def move(others):
+        return assembly.grasps.move("block", "block", here, block, {}, others)
+
+    overhang = 0.05  # the beam's underside 20 mm above the block's top
+    inside = move(beam_at(-TOLERANCES.sweep_touch / 2, overhang))
+    assert not inside.ok and inside.blockers == ("beam",), inside.reason
+    assert "above the object at the place" in inside.reason
+    assert not move(beam_at(TOLERANCES.sweep_clearance / 2, overhang)).ok
+    assert move(beam_at(2 * TOLERANCES.sweep_clearance, overhang)).ok
+    # lying on the table beside the place, the beam may touch the sweep
+    assert move(beam_at(-TOLERANCES.sweep_touch / 2, 0.0)).ok

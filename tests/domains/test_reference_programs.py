@@ -135,7 +135,7 @@ def _lengths_and_angles() -> dict[float, str]:
     for f in FingerModel.__dataclass_fields__:
         add(f"FingerModel.{f}", getattr(FingerModel(), f))
     for f in ("penetration", "contact", "com_margin", "perceived_penetration",
-              "perceived_contact", "sweep_touch", "grasp_margins", "vertical"):  # fmt: skip
+              "perceived_contact", "sweep_touch", "sweep_clearance", "grasp_margins", "vertical"):  # fmt: skip
         add(f"TOLERANCES.{f}", getattr(TOLERANCES, f))
     for f in ("face_vertical", "face_antiparallel", "yaw_only"):
         add(f"TOLERANCES.{f}", getattr(TOLERANCES, f), angle=True)
