@@ -22,7 +22,7 @@ from domains.base import Domain
 from domains.errors import GenerationError
 from domains.generation import retry
 from domains.registry import register
-from domains.tangram.figures import OBJECTS, UNIT
+from domains.tangram.figures import OBJECTS, UNIT, catalogue_keys, compose_figure, shape_key
 from geometry import PLACEMENT_SPREAD, TOLERANCES, Body, Workspace, place, yaw_of, yaw_pose
 
 # Benchmark goal k uses the k-th figure (goal 1, the reference, is the square); free draws
@@ -40,6 +40,7 @@ TEST_TURNS = {
 }
 TEST_START_CLEARANCE = 0.008
 TEST_TURNED = (0.6, np.pi)  # a turned figure's heading away from upright [rad] (dev ≤ 0.35)
+_CATALOGUE = catalogue_keys()  # the dev and test figures' outlines: never composed
 
 
 @register("tangram")
@@ -76,6 +77,10 @@ class Tangram(Domain):
             ("temporary_clear_of_goals", {}),
         ],
     }
+    composed_goals = (
+        "any figure of the seven pieces joined edge to edge on the figures' lattice (each piece "
+        "turned by a multiple of 45°), drawn upright as the catalogue's are"
+    )
 
     @cached_property
     def figures(self) -> dict[str, dict]:
@@ -91,13 +96,34 @@ class Tangram(Domain):
         """The figure `name` (a dev or a test figure) built at `pose` (the figure's centre,
         on the table)."""
         fig = self.figures[name] if name in self.figures else self.test_figures[name]
-        centre = np.asarray(fig["centre"], float)
-        out = []
-        for oid, p in fig["pieces"].items():
-            xy = (np.asarray(p["centroid"], float) - centre) * UNIT
-            local = yaw_pose(xy[0], xy[1], 0.0, p["rotation_45"] * np.pi / 4)
-            out.append({"id": oid, "mesh": OBJECTS[oid], "pose": pose @ local})
-        return sorted(out, key=lambda r: list(OBJECTS).index(r["id"]))
+        return _records(fig, pose)
+
+    def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:
+        """A figure of `compose_figure` (the seven pieces joined edge to edge on the figures'
+        lattice), placed and started as dev goals are (upright ±20°); never a dev or a test
+        figure's outline, turned or mirrored (the test figures stay held out)."""
+        rng = np.random.default_rng(seed)
+        fig = compose_figure(rng)
+        if fig is None or shape_key(fig["silhouette"]) in _CATALOGUE:
+            return None
+        for _ in range(50):
+            x, y = rng.uniform(0.42, 0.58), rng.uniform(-0.12, 0.12)
+            goal = _records(fig, yaw_pose(x, y, 0.0, np.pi / 2 + rng.uniform(-0.35, 0.35)))
+            if self._inside(goal):
+                break
+        else:
+            return None
+        try:
+            return self.make_start(rng, goal), goal
+        except GenerationError:
+            return None
+
+    def _inside(self, records: Sequence[Mapping]) -> bool:
+        """Every piece of `records` wholly inside the placement region."""
+        return all(
+            self.placement.contains(place(r["id"], self.parts[r["mesh"]], r["pose"]).xy())
+            for r in records
+        )
 
     def make_goal(
         self, rng: np.random.Generator, index: int | None, split: str = "dev"
@@ -117,10 +143,7 @@ class Tangram(Domain):
             recs = self.figure_records(
                 name, yaw_pose(x, y, 0.0, np.pi / 2 + rng.uniform(-0.35, 0.35))
             )
-            if all(
-                self.placement.contains(place(r["id"], self.parts[r["mesh"]], r["pose"]).xy())
-                for r in recs
-            ):
+            if self._inside(recs):
                 return recs
         raise GenerationError(f"figure {name!r} does not fit the workspace")
 
@@ -138,10 +161,7 @@ class Tangram(Domain):
             else:
                 away = rng.uniform(-0.35, 0.35)
             recs = self.figure_records(name, yaw_pose(x, y, 0.0, np.pi / 2 + away))
-            if all(
-                self.placement.contains(place(r["id"], self.parts[r["mesh"]], r["pose"]).xy())
-                for r in recs
-            ):
+            if self._inside(recs):
                 return recs
         raise GenerationError(f"figure {name!r} does not fit the workspace")
 
@@ -197,3 +217,14 @@ class Tangram(Domain):
             out += recs
             bodies += [place(r["id"], self.parts[r["mesh"]], r["pose"]) for r in recs]
         return out
+
+
+def _records(fig: Mapping, pose: np.ndarray) -> list[dict]:
+    """The records of figure `fig` (as `figures.json` holds one) built at `pose`."""
+    centre = np.asarray(fig["centre"], float)
+    out = []
+    for oid, p in fig["pieces"].items():
+        xy = (np.asarray(p["centroid"], float) - centre) * UNIT
+        local = yaw_pose(xy[0], xy[1], 0.0, p["rotation_45"] * np.pi / 4)
+        out.append({"id": oid, "mesh": OBJECTS[oid], "pose": pose @ local})
+    return sorted(out, key=lambda r: list(OBJECTS).index(r["id"]))

@@ -17,6 +17,7 @@ their family: outlines that no dev figure has, even turned or mirrored (`shape_k
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -530,3 +531,73 @@ TEST_FAMILIES: dict[str, tuple[str, ...]] = {
         "pelican",
     ),
 }
+
+
+# -- figures composed beyond the catalogues (`Tangram.compose`) --------------------------
+
+COMPOSE_WINDOW = 10  # the lattice window [units] a composed figure grows in (400 mm)
+
+
+def _edges(cs: frozenset) -> frozenset:
+    """The sides of a set of quarter cells' triangles (unordered, in half units)."""
+    out = set()
+    for c in cs:
+        t = _quarter(c)
+        out |= {tuple(sorted(e)) for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    return frozenset(out)
+
+
+@cache
+def _window_options(mesh: str) -> tuple[tuple[int, tuple[float, float], frozenset, frozenset], ...]:
+    """Every lattice placement of a piece in the compose window: (rotation k, centroid
+    [units], quarter cells, their triangles' sides)."""
+    n = COMPOSE_WINDOW
+    window = frozenset((i, j, q) for i in range(n) for j in range(n) for q in range(4))
+    return tuple(
+        (int(k), (float(c[0]), float(c[1])), cs, _edges(cs))
+        for k, c, cs in placements(mesh, window)
+    )
+
+
+def catalogue_keys() -> frozenset:
+    """The outlines (`shape_key`) of every dev and test figure."""
+    return frozenset(shape_key(p) for p in (*SILHOUETTES.values(), *TEST_SILHOUETTES.values()))
+
+
+def compose_figure(rng: np.random.Generator) -> dict | None:
+    """Seven pieces joined edge to edge on the figures' lattice, in a random order, each
+    sharing part of an edge with a piece placed before it (a place the likelier the more
+    sides it shares), as `figures.json` holds a figure ("silhouette": the pieces' outlines,
+    "centre", "pieces"); None when a piece finds no place in the window."""
+    ids = [str(i) for i in rng.permutation(list(OBJECTS))]
+    cells_: frozenset = frozenset()
+    sides: frozenset = frozenset()
+    chosen: dict[str, tuple[int, tuple[float, float]]] = {}
+    middle = np.full(2, COMPOSE_WINDOW / 2)
+    for n, oid in enumerate(ids):
+        options = _window_options(OBJECTS[oid])
+        if n == 0:
+            fits = [o for o in options if np.abs(np.asarray(o[1]) - middle).max() <= 1.0]
+        else:
+            fits = [o for o in options if not (o[2] & cells_) and (o[3] & sides)]
+        if not fits:
+            return None
+        # the more sides a place shares, the likelier: figures are compact more often than not
+        weight = np.array([len(o[3] & sides) for o in fits], float) ** 2 if n else None
+        pick = rng.choice(len(fits), p=None if weight is None else weight / weight.sum())
+        k, c, cs, es = fits[int(pick)]
+        cells_, sides = cells_ | cs, sides | es
+        chosen[oid] = (k, c)
+    polys = {
+        oid: canonical(OBJECTS[oid]) @ _rot(k).T + np.asarray(c) for oid, (k, c) in chosen.items()
+    }
+    allp = np.concatenate(list(polys.values()))
+    centre = (allp.min(axis=0) + allp.max(axis=0)) / 2
+    return {
+        "silhouette": [[[round(float(v), 9) for v in p] for p in poly] for poly in polys.values()],
+        "centre": [float(v) for v in centre],
+        "pieces": {
+            oid: {"rotation_45": k, "centroid": [round(float(v), 9) for v in c]}
+            for oid, (k, c) in sorted(chosen.items())
+        },
+    }

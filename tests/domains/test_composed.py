@@ -8,10 +8,10 @@ import pytest
 import domains
 
 
-@pytest.mark.parametrize("name", ["cubes", "assembly"])
+@pytest.mark.parametrize("name", ["cubes", "tangram", "assembly"])
 def test_composed_instances_carry_an_executable_order(name):
     """`Domain.composed_instance`: the plan checks' composed goals come with an order the
-    robot's hand model accepts step by step; domains without a composer give none."""
+    robot's hand model accepts step by step."""
     from benchmarks.compositions_bench import hand_problem
     from checks.inputs import composed
 
@@ -20,8 +20,41 @@ def test_composed_instances_carry_an_executable_order(name):
     assert [i.name.split("/")[0] for i in got] == ["composed", "composed"]
     for inst in got:
         assert inst.order and hand_problem(domain, inst.start["objects"], inst.order) is None
-    assert domains.load("tangram").composed_instance(1) is None
-    assert composed(domains.load("tangram"), (1, 2, 3), 2) == []
+
+
+def test_composed_tangram_figures_are_packed_edge_to_edge_and_never_a_catalogue_outline():
+    """`Tangram.compose`: seven pieces, each touching another, none overlapping (the scene
+    checks), in an outline no dev or test figure has, turned or mirrored."""
+    import numpy as np
+
+    from domains.generation import geometric_problems
+    from domains.tangram import figures
+    from geometry import body_separation, place
+
+    tangram = domains.load("tangram")
+    keys = figures.catalogue_keys()
+    seen = set()
+    for seed in range(1, 9):
+        drawn = tangram.compose(seed)
+        assert drawn is not None, seed
+        start, goal = drawn
+        assert geometric_problems(tangram, tangram.scene(goal)) == []
+        assert geometric_problems(tangram, tangram.scene(start)) == []
+        bodies = [place(r["id"], tangram.parts[r["mesh"]], r["pose"]) for r in goal]
+        assert len(bodies) == 7
+        for b in bodies:  # every piece 0.5 mm from a neighbour, as the task text packs them
+            gap = min(body_separation(b, o)[0] for o in bodies if o is not b)
+            assert 0.0 < gap < 0.001, (seed, b.id, gap)
+        fig = figures.compose_figure(np.random.default_rng(seed))
+        key = figures.shape_key(fig["silhouette"])
+        assert key not in keys
+        seen.add(key)
+    assert len(seen) == 8  # eight seeds, eight outlines
+    # what compose refuses: every test figure's outline, also turned a quarter and mirrored
+    from domains.tangram import _CATALOGUE
+
+    for polys in figures.TEST_SILHOUETTES.values():
+        assert figures.shape_key([[(-y, -x) for x, y in p] for p in polys]) in _CATALOGUE
 
 
 def test_composed_cubes_goals_are_never_a_test_family():
