@@ -20,8 +20,9 @@ knob's two axes.
    perceived poses as they are would land pieces on their neighbours' edges. The targets are
    spread (`toolbox.spread_footprints`): gaps opened towards 1.5 mm, no piece moved more than
    1.5 mm (the goal tolerance is 5 mm), pieces already at their goal left where they are.
-4. Order. Greedy, one transfer per step: among the pieces whose target is free (no other
-   piece on it) and whose knob the fingers can take at the pick and at the place along the
+4. Order. Greedy, one transfer per step: among the pieces whose target is free (no piece
+   still to move within the perceived states' overlap slack of it: a perceived gap that
+   narrow may be contact) and whose knob the fingers can take at the pick and at the place along the
    same knob axis (no other knob in the fingers' way), place first the one that keeps every
    other unplaced piece grippable at its goal afterwards, then the one that costs the pieces
    still to come least. While both of a piece's knob axes are open the gripper can hold it
@@ -103,7 +104,9 @@ SPREAD_GAP, SPREAD_SHIFT = PLACEMENT_SPREAD
 # a piece whose centre lies within the spread's shift of its goal, and whose outline its turn
 # moves no farther, stays where it is
 DONE_POS = SPREAD_SHIFT  # [m]
-FREE_GAP = TOUCHING  # a target this close to a piece not yet at its goal is occupied [m]
+# a target this close to a piece not yet at its goal is occupied: perceived objects that touch
+# may overlap by PERCEIVED_OVERLAP, so a perceived gap narrower than that may be contact [m]
+FREE_GAP = PERCEIVED_OVERLAP
 EDGE_GAP = 0.0005  # the figure's pieces lie this far apart, edge to edge (the task text) [m]
 PLACED_GAP = -EDGE_GAP  # … to a piece at its goal (spreading could not open everything) [m]
 # a turn the wrist makes with either of two grasps half a turn apart: one of them leaves it
