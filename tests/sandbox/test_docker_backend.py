@@ -148,7 +148,8 @@ def test_leftover_containers_are_reaped(sandbox_image, docker_executor):
         sandbox_image, ["sleep", "600"], detach=True, labels=dead_owner, network_mode="none"
     )
     try:
-        assert reap_leftovers(client) >= 1
+        reap_leftovers(client)  # (another test run on this daemon may reap it first: the count
+        # can be 0, so the test asks only that it is gone)
         ids = {c.id for c in client.containers.list(all=True, filters={"label": f"{LABEL}=1"})}
         assert leftover.id not in ids
     finally:
