@@ -100,7 +100,8 @@ RULES: tuple[Rule, ...] = (
         "{geometry.tolerances:TOLERANCES.grasp_margins[-1]|mm} at the pick (the objects as "
         "they are before the step) and at the place (as they are after it), nothing above the "
         "object at either end (it rises straight up and comes straight down: a part overhanging "
-        "its way keeps {geometry.tolerances:TOLERANCES.sweep_clearance|mm} from it), a target turned from the current pose only about the vertical "
+        "its way keeps {geometry.tolerances:TOLERANCES.sweep_clearance|mm} from it), a target "
+        "turned from the current pose only about the vertical "
         "(to within {geometry.tolerances:TOLERANCES.yaw_only|deg}, modulo its symmetry), and "
         "an arm (IK) solution at both ends.",
     ),
