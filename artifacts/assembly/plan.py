@@ -54,7 +54,9 @@ from toolbox.robot import (
 )
 from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP, RESTING_GAP, TOUCHING, VERTICAL
 
-ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
+# a goal part perceived at most the perceived states' slack above what carries it rests on it;
+# higher, it floats [m]
+ON_GAP = PERCEIVED_GAP
 # a part perceived within the perceived states' slack of its goal pose counts as placed [m]
 SAME = PERCEIVED_GAP
 TILT = np.radians(20.0)  # our choice: a goal turned farther from every resting pose is refused

@@ -370,3 +370,55 @@ def test_no_toolbox_fact_is_written_inline(path):
         if v in TOOLBOX_NAMED and v not in own
     ]
     assert not copied, f"{path}: toolbox facts written inline: {copied}"
+
+
+def _judged_numbers(domain: Domain) -> dict[float, str]:
+    """The numbers a plan must never hold, stated in its prompt or not: the scoring's tolerance
+    (in metres, degrees and radians), the relation gaps the reference relations use, and the
+    executor's and the construction planner's own lengths. A plan decides with the perceived
+    states' slack and the hand model (toolbox names); `relate` alone reproduces the stated
+    relation gaps, which are its specification."""
+    from dataclasses import fields
+
+    from domains.reference_order import ReferencePlanner
+    from sim.executor import ExecutorConfig
+
+    out: dict[float, str] = {}
+    tol = domain.tolerance
+    out[round(tol.translation, 6)] = "the scoring tolerance"
+    if tol.rotation is not None:
+        out[round(float(np.degrees(tol.rotation)), 3)] = "the scoring tolerance [°]"
+        out[round(tol.rotation, 6)] = "the scoring tolerance [rad]"
+    for name in domains.names():
+        d = domains.load(name)
+        out.setdefault(round(d.on_gap, 6), f"{name}'s 'on' gap")
+        out.setdefault(round(d.adjacent_gap, 6), f"{name}'s 'adjacent' gap")
+    for f in fields(ReferencePlanner):
+        if isinstance(f.default, float):
+            out.setdefault(round(f.default, 6), f"ReferencePlanner.{f.name}")
+    config = ExecutorConfig()
+    for f in fields(config):
+        for v in _floats(getattr(config, f.name)):
+            if v >= 1e-4:
+                out.setdefault(v, f"ExecutorConfig.{f.name}")
+    return out
+
+
+def test_the_judged_numbers_are_found():
+    judged = _judged_numbers(domains.load("tangram"))
+    assert {0.005, 5.0, 0.008, 0.0005, 0.03} <= set(judged)
+    assert judged[0.005] == "the scoring tolerance"
+
+
+@pytest.mark.parametrize(
+    "path", [p for p in PROGRAMS if p.name == "plan.py"], ids=lambda p: p.parts[-3]
+)
+def test_a_plan_holds_no_scoring_tolerance_relation_gap_or_executor_length(path):
+    """Stated or not, a plan does not write the scorer's tolerance, a relation gap or a length
+    of the executor or the construction planner as a number: it takes the perceived states'
+    slack and the hand's sizes by their toolbox names, so that a reader sees what it means and
+    a plan never aims at what it is scored with."""
+    judged = _judged_numbers(domains.load(path.parts[-3]))
+    numbers = _literals(path) + _inline_numbers(path.read_text())
+    copied = sorted({(line, v, judged[v]) for line, v in numbers if v in judged})
+    assert not copied, f"{path}: numbers of the scoring, relations or executor: {copied}"

@@ -39,17 +39,15 @@ from toolbox.robot import (
 )
 from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP
 
-SIDE = 0.04  # cube edge [m]
-HALF = SIDE / 2
-ON_GAP = 0.008  # vertical gap still read as resting on [m]
-# a cube perceived within the perceived states' slack of its goal position counts as placed [m]
-SAME = PERCEIVED_GAP
-# … and this close in yaw, modulo 90°: a turn that moves no corner farther than SAME
-SAME_YAW = SAME / (HALF * np.sqrt(2))
-# goals may lie anywhere in the workspace, with slack for perception: half the domain's
-# position tolerance (10 mm, the prompt states it), our choice [m]
-TOLERANCE = 0.01
-SLACK = TOLERANCE / 2
+# the cubes' edge, read from the meshes `plan` receives (`_learn_side`; 40 mm, the task text
+# says), and what follows from it: half of it, a yaw within SAME_YAW moving no corner farther
+# than SAME, and NEAR (below) [m]
+SIDE = HALF = SAME_YAW = NEAR = None
+# a cube perceived at most the perceived states' slack above (or into) a cube's top rests on it
+# [m]; one perceived within that slack of its goal position counts as placed
+ON_GAP = SAME = PERCEIVED_GAP
+# goals may lie anywhere in the workspace, with the perceived states' slack [m]
+SLACK = SAME
 GOALS = Workspace(
     x=(WORKSPACE.x[0] - SLACK, WORKSPACE.x[1] + SLACK),
     y=(WORKSPACE.y[0] - SLACK, WORKSPACE.y[1] + SLACK),
@@ -74,9 +72,18 @@ CLEARANCES = (
 # may lie this far into one another (toolbox.stability) [m]
 OVERLAP = PERCEIVED_OVERLAP
 SLIVER = 0.0002  # footprints overlapping deeper than this share a column (not rounding) [m]
-# cubes whose centres are farther apart than the open hand (the widest opening and a fingertip
-# on each side) and a cube's diagonal never meet the gripper at the other [m]
-NEAR = MAX_OPENING + 2 * FINGER_DEPTH + SIDE * np.sqrt(2)
+
+
+def _learn_side(meshes, keys):
+    """SIDE and what follows from it, from the widest extent of the cubes' meshes."""
+    global SIDE, HALF, SAME_YAW, NEAR
+    extents = [np.ptp(np.asarray(meshes[k].vertices, dtype=float), axis=0) for k in keys]
+    SIDE = float(max(e.max() for e in extents))
+    HALF = SIDE / 2
+    SAME_YAW = SAME / (HALF * np.sqrt(2))  # modulo 90°
+    # cubes whose centres are farther apart than the open hand (the widest opening and a
+    # fingertip on each side) and a cube's diagonal never meet the gripper at the other
+    NEAR = MAX_OPENING + 2 * FINGER_DEPTH + SIDE * np.sqrt(2)
 
 
 def _yaw(R):
@@ -311,6 +318,11 @@ def _temporary(i, current, pending, hand=None, pickable=()):
 
 
 def plan(start_state, goal_state, meshes):
+    keys = {r["mesh"] for r in (*start_state["objects"], *goal_state["objects"])}
+    unknown = sorted(k for k in keys if k not in meshes)
+    if unknown or not keys:
+        return {"status": "infeasible", "reason": f"no mesh for {unknown or 'any cube'}"}
+    _learn_side(meshes, keys)
     start = {str(r["id"]): _as_xyzy(r["pose"]) for r in start_state["objects"]}
     goal_raw = {str(r["id"]): r["pose"] for r in goal_state["objects"]}
     if sorted(start) != sorted(goal_raw):

@@ -53,10 +53,12 @@ from toolbox.robot import (
     JAW_CLEARANCES,
     PLACEMENT,
     PLACEMENT_SPREAD,
+    SWEEP_TOUCH,
     WORKSPACE,
     WRIST_RANGE,
+    YAW_ONLY,
 )
-from toolbox.stability import PERCEIVED_OVERLAP, TOUCHING
+from toolbox.stability import PERCEIVED_GAP, PERCEIVED_OVERLAP, TOUCHING
 
 SYMMETRY = {  # rotational symmetry order about the vertical (the task text)
     "large_triangle": 1,
@@ -91,11 +93,12 @@ def _learn_knob(meshes):
     )
 
 
-# the domain's tolerance (the prompt's "Tolerances": 5 mm and 5°): a goal piece perceived
-# within it of lying flat on the table is on the table
-TOLERANCE_M, TOLERANCE_RAD = 0.005, np.radians(5.0)
-UPRIGHT = np.cos(TOLERANCE_RAD)  # |z axis · world z| of a piece lying flat
-ON_TABLE = TOLERANCE_M  # a goal piece's origin this far from z = 0 is not on the table [m]
+# a piece lies flat when it is tilted no more than a turn about the vertical allows
+# (toolbox.robot.YAW_ONLY): |z axis · world z| at least this
+UPRIGHT = np.cos(YAW_ONLY)
+# a goal piece lies on the table when it is perceived no higher above it than the perceived
+# states' slack under an object, and no deeper into it than their slack between objects [m]
+ABOVE_TABLE, INTO_TABLE = PERCEIVED_GAP, PERCEIVED_OVERLAP
 # goal pieces overlapping deeper than the perceived states' slack (and a touch) cannot both be
 # built [m]
 CROWDED = PERCEIVED_OVERLAP + TOUCHING
@@ -107,8 +110,9 @@ DONE_POS = SPREAD_SHIFT  # [m]
 # a target this close to a piece not yet at its goal is occupied: perceived objects that touch
 # may overlap by PERCEIVED_OVERLAP, so a perceived gap narrower than that may be contact [m]
 FREE_GAP = PERCEIVED_OVERLAP
-EDGE_GAP = 0.0005  # the figure's pieces lie this far apart, edge to edge (the task text) [m]
-PLACED_GAP = -EDGE_GAP  # … to a piece at its goal (spreading could not open everything) [m]
+# … and a target may reach into a piece already at its goal (spreading could not open every
+# gap) as deep as the hand model lets a held piece's sweep touch others [m]
+PLACED_GAP = -SWEEP_TOUCH
 # a turn the wrist makes with either of two grasps half a turn apart: one of them leaves it
 # within a quarter turn of the middle of WRIST_RANGE, from where it turns WRIST_RANGE[1] - 90°
 # (83°) either way; less, for where the arm's own pose puts the wrist
@@ -332,7 +336,7 @@ def plan(start_state, goal_state, meshes):
             if flat is None:
                 return {"status": "infeasible", "reason": f"'{i}' in the {name}: {why}"}
             x, y, z, yaw = flat
-            if name == "goal" and abs(z) > ON_TABLE:
+            if name == "goal" and not -INTO_TABLE <= z <= ABOVE_TABLE:
                 where = "above" if z > 0 else "below"
                 return {
                     "status": "infeasible",
