@@ -57,3 +57,14 @@ def test_every_step_leaves_the_fingers_room(cubes, reference_plan, seed):
     assume(drawn is not None and drawn[2])  # a scene, with an order the robot can execute
     start, goal, _ = drawn
     assert verdict(cubes, reference_plan, start, goal) == "ok"
+
+
+def test_no_placement_leaves_the_places_still_to_fill_without_an_order(cubes, reference_plan):
+    """composed/seed1057 (`rivet eval cubes --policy artifacts --composed 1000`): red put down
+    early walled in no single place, but left green, purple and yellow's places no order with
+    room for the fingers; the hand-aware search looped and the plan fell back to its hand-blind
+    order (`no_grasp` at green's place). A cube now waits when placing it would leave the
+    places still to fill without such an order."""
+    drawn = draw(cubes, 1057)
+    assert drawn is not None and drawn[2]
+    assert verdict(cubes, reference_plan, drawn[0], drawn[1]) == "ok"

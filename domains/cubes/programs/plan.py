@@ -255,11 +255,11 @@ def _takes_place(hand, i, goal, placed, pending):
 
 
 def _goal_order(hand, goal, goal_sup):
-    """An order of the goal places in which each cube, put down after its supporters, has room
-    for the fingers among the cubes placed before it (depth-first, lowest goal first; memoised
-    on the placed set), or None when there is none. Cubes that wall each other's places in
-    (each beside one and at right angles to another) need it: the greedy step sees one
-    placement ahead only."""
+    """A function: the set of cubes already in their goal places → an order of all goal places,
+    those first, in which each cube, put down after its supporters, has room for the fingers
+    among the cubes placed before it (depth-first, lowest goal first; memoised on the placed
+    set), or None when there is none. Cubes that wall each other's places in (each beside one
+    and at right angles to another) need it: the greedy step sees one placement ahead only."""
     ids = sorted(goal, key=lambda i: (goal[i][2], i))
     dead = set()
 
@@ -280,7 +280,7 @@ def _goal_order(hand, goal, goal_sup):
         dead.add(placed)
         return None
 
-    return extend([])
+    return lambda placed: extend(sorted(placed, key=ids.index))
 
 
 def _temporary(i, current, pending, hand=None, pickable=()):
@@ -351,7 +351,8 @@ def _build(start, goal, hand):
     the gripper room at both ends and no cube still to move without a grasp."""
     grip = hand is not None
     goal_sup = _supporters(goal)
-    order = _goal_order(hand, goal, goal_sup) if grip else None
+    finish = _goal_order(hand, goal, goal_sup) if grip else None
+    order = finish(frozenset()) if grip else None
     rank = {i: k for k, i in enumerate(order)} if order else {}
     current = dict(start)
     steps = []
@@ -392,6 +393,12 @@ def _build(start, goal, hand):
                         continue
                     if _takes_place(hand, i, goal, placed, movers):
                         continue  # a cube still to come goes first
+                    if (
+                        order
+                        and finish(frozenset(placed)) is not None
+                        and finish(frozenset(placed) | {i}) is None
+                    ):
+                        continue  # the places still to fill would have no order with room
                 move = (i, goal[i])
                 break
         if move is None:
