@@ -5,8 +5,8 @@
 Greedy construction: every round, place a cube whose goal supporters are already final, whose
 goal column is free and which nothing rests on, lowest goal first; when none can be placed,
 move one blocking cube to a free temporary place on the table (a cube squatting on a goal spot,
-the top of a stack in the wrong order, …). Support is read from geometry (cubes are 40 mm,
-upright): the relation graphs are not needed, so perception noise in them cannot mislead it.
+the top of a stack in the wrong order, …). Support is read from geometry (upright cubes, their
+edge read from the meshes): the relation graphs are not needed, so perception noise in them cannot mislead it.
 Goal poses are snapped to resting heights and to upright yaw rotations; orientation about the
 vertical is kept from the goal (cube rows and pyramids need it to fit). A goal that no plan can
 reach (floating or interpenetrating cubes, unknown ids) gives an explicit "infeasible".
@@ -17,8 +17,9 @@ checks use) finds a grasp with room among the other cubes at the pick and at the
 when it does not take away the last grasp of a cube that still has to move: neither where that
 cube stands now nor at its goal place (a cube with goal neighbours on two perpendicular sides
 goes before the second of them, or the jaws find no way down). The goal places are therefore
-filled in an order, found once by a depth-first search, in which each has room for the fingers
-among those filled before it. A cube in the fingers' way goes to a temporary place first. When
+filled in an order, found by a depth-first search, in which each has room for the fingers
+among those filled before it; a cube goes into its place only while the places still to fill
+keep such an order. A cube in the fingers' way goes to a temporary place first. When
 no order satisfies that, the plan falls back to the geometric order alone. Goals must lie
 inside the robot's workspace (`toolbox.robot.WORKSPACE`); temporary places are in the placement
 region (`toolbox.robot.PLACEMENT`), where the arm is comfortable.
@@ -257,8 +258,8 @@ def _takes_place(hand, i, goal, placed, pending):
 def _goal_order(hand, goal, goal_sup):
     """A function: the set of cubes already in their goal places → an order of all goal places,
     those first, in which each cube, put down after its supporters, has room for the fingers
-    among the cubes placed before it (depth-first, lowest goal first; memoised on the placed
-    set), or None when there is none. Cubes that wall each other's places in (each beside one
+    among the cubes placed before it (depth-first, lowest goal first; dead ends memoised
+    on the placed set), or None when there is none. Cubes that wall each other's places in (each beside one
     and at right angles to another) need it: the greedy step sees one placement ahead only."""
     ids = sorted(goal, key=lambda i: (goal[i][2], i))
     dead = set()
@@ -320,9 +321,10 @@ def _temporary(i, current, pending, hand=None, pickable=()):
 def plan(start_state, goal_state, meshes):
     keys = {r["mesh"] for r in (*start_state["objects"], *goal_state["objects"])}
     unknown = sorted(k for k in keys if k not in meshes)
-    if unknown or not keys:
-        return {"status": "infeasible", "reason": f"no mesh for {unknown or 'any cube'}"}
-    _learn_side(meshes, keys)
+    if unknown:
+        return {"status": "infeasible", "reason": f"no mesh for {unknown}"}
+    if keys:
+        _learn_side(meshes, keys)
     start = {str(r["id"]): _as_xyzy(r["pose"]) for r in start_state["objects"]}
     goal_raw = {str(r["id"]): r["pose"] for r in goal_state["objects"]}
     if sorted(start) != sorted(goal_raw):

@@ -116,6 +116,16 @@ def test_plans_derive_no_region_that_reproduces_the_generators(path):
     assert not derived, f"{path}: regions that reproduce the placement region's edges: {derived}"
 
 
+# the executor's own lengths [m] (its other fields are times, speeds and counts)
+EXECUTOR_LENGTHS = (
+    "final_approach",
+    "clearance",
+    "min_transfer_height",
+    "release_height",
+    "hold_tolerance",
+)
+
+
 def _lengths_and_angles() -> dict[float, str]:
     """The executor's, the checks', the scoring's and the generators' own lengths [m] and
     angles (in degrees as a program writes them in `np.radians(...)`), by value → name: what a
@@ -140,8 +150,7 @@ def _lengths_and_angles() -> dict[float, str]:
     for f in ("face_vertical", "face_antiparallel", "yaw_only"):
         add(f"TOLERANCES.{f}", getattr(TOLERANCES, f), angle=True)
     config = ExecutorConfig()
-    for f in ("final_approach", "clearance", "min_transfer_height", "release_height",
-              "hold_tolerance"):  # fmt: skip
+    for f in EXECUTOR_LENGTHS:
         add(f"ExecutorConfig.{f}", getattr(config, f))
     add("ExecutorConfig.in_hand.position", config.in_hand.position)
     add("ExecutorConfig.in_hand.rotation", config.in_hand.rotation, angle=True)
@@ -397,10 +406,9 @@ def _judged_numbers(domain: Domain) -> dict[float, str]:
         if isinstance(f.default, float):
             out.setdefault(round(f.default, 6), f"ReferencePlanner.{f.name}")
     config = ExecutorConfig()
-    for f in fields(config):
-        for v in _floats(getattr(config, f.name)):
-            if v >= 1e-4:
-                out.setdefault(v, f"ExecutorConfig.{f.name}")
+    for f in EXECUTOR_LENGTHS:
+        for v in _floats(getattr(config, f)):
+            out.setdefault(v, f"ExecutorConfig.{f}")
     return out
 
 
