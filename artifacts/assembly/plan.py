@@ -63,7 +63,6 @@ TILT = np.radians(20.0)  # our choice: a goal turned farther from every resting 
 # perceived states hold parts up to PERCEIVED_OVERLAP into one another (toolbox.stability):
 # goal parts may overlap that much, and a part still to move that comes that near a place may
 # in truth stand in it; a placement may touch others TOUCHING deep
-REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 # candidate temporary places lie on a square grid this fine: no free spot as wide as the open
 # jaws' clearance is stepped over [m]
 GRID = JAW_CLEARANCES[0]
@@ -483,19 +482,19 @@ def _temporary(world, i, pending, keep=(), poor_place=None, accept=None):
     T0 = world.poses[i].copy()
     T0[2, 3] -= _lowest(mesh, T0)
     hull = _footprint(mesh, T0)
-    xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
-    ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
+    xs = np.arange(PLACEMENT.x[0], PLACEMENT.x[1] + 1e-9, GRID)
+    ys = np.arange(PLACEMENT.y[0], PLACEMENT.y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - T0[:2, 3], axis=1), kind="stable")
     cand = cand[order]
     shifts = cand - T0[:2, 3]
     corners = hull[None, :, :] + shifts[:, None, :]  # the region is convex: corners suffice
     inside = (
-        (corners[..., 0] >= REGION_X[0]).all(axis=1)
-        & (corners[..., 0] <= REGION_X[1]).all(axis=1)
-        & (corners[..., 1] >= REGION_Y[0]).all(axis=1)
-        & (corners[..., 1] <= REGION_Y[1]).all(axis=1)
-        & (np.linalg.norm(corners, axis=2) <= REACH).all(axis=1)
+        (corners[..., 0] >= PLACEMENT.x[0]).all(axis=1)
+        & (corners[..., 0] <= PLACEMENT.x[1]).all(axis=1)
+        & (corners[..., 1] >= PLACEMENT.y[0]).all(axis=1)
+        & (corners[..., 1] <= PLACEMENT.y[1]).all(axis=1)
+        & (np.linalg.norm(corners, axis=2) <= PLACEMENT.reach).all(axis=1)
     )
     others = [_footprint(world.mesh[j], U) for j, U in sorted(world.poses.items()) if j != i]
     to_parts = _gaps(hull, others, shifts).min(axis=1, initial=np.inf)

@@ -134,7 +134,6 @@ TEMPORARY = (
 # candidate temporary places lie on a square grid this fine: no free spot as wide as the open
 # jaws' clearance is stepped over [m]
 GRID = JAW_CLEARANCES[0]
-REGION_X, REGION_Y, REACH = PLACEMENT.x, PLACEMENT.y, PLACEMENT.reach  # where to put parts aside
 OUTLINES = {}  # mesh key → bottom outline (k, 2) in the piece's frame [m], counter-clockwise
 
 
@@ -241,13 +240,13 @@ def _yaw_close(a, b, n, radius):
     return abs((a - b + period / 2) % period - period / 2) * radius <= DONE_POS
 
 
-def _inside(points, xs, ys, reach):
+def _inside(points, region):
     return bool(
-        np.all(points[:, 0] >= xs[0])
-        and np.all(points[:, 0] <= xs[1])
-        and np.all(points[:, 1] >= ys[0])
-        and np.all(points[:, 1] <= ys[1])
-        and np.all(np.linalg.norm(points, axis=1) <= reach)
+        np.all(points[:, 0] >= region.x[0])
+        and np.all(points[:, 0] <= region.x[1])
+        and np.all(points[:, 1] >= region.y[0])
+        and np.all(points[:, 1] <= region.y[1])
+        and np.all(np.linalg.norm(points, axis=1) <= region.reach)
     )
 
 
@@ -269,14 +268,14 @@ def _temporary(i, current, pending_goals, yaw=None):
     it is."""
     p = current[i] if yaw is None else current[i].moved(current[i].x, current[i].y, yaw)
     others = [q for j, q in current.items() if j != i]
-    xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
-    ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
+    xs = np.arange(PLACEMENT.x[0], PLACEMENT.x[1] + 1e-9, GRID)
+    ys = np.arange(PLACEMENT.y[0], PLACEMENT.y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - p.centre, axis=1), kind="stable")
     for clear, goal_clear in TEMPORARY:
         for k in order:
             q = p.moved(*cand[k])
-            if not _inside(q.outline, REGION_X, REGION_Y, REACH):
+            if not _inside(q.outline, PLACEMENT):
                 continue
             if any(_gap(q, o) < clear for o in others):
                 continue
@@ -292,7 +291,7 @@ def _turned(i, current, yaw, pending_goals):
     p = current[i].moved(current[i].x, current[i].y, yaw)
     others = [q for j, q in current.items() if j != i]
     if (
-        _inside(p.outline, REGION_X, REGION_Y, REACH)
+        _inside(p.outline, PLACEMENT)
         and all(_gap(p, o) >= TEMPORARY[0][0] for o in others)
         and all(_gap(p, g) >= TEMPORARY[0][1] for g in pending_goals)
         and len(_free_axes(p, others)) == 2
@@ -347,7 +346,7 @@ def plan(start_state, goal_state, meshes):
     for k, i in enumerate(ids):
         if start_recs[i]["mesh"] != goal_recs[i]["mesh"]:
             return {"status": "infeasible", "reason": f"'{i}' has different meshes"}
-        if not _inside(goal[i].outline, WORKSPACE.x, WORKSPACE.y, WORKSPACE.reach):
+        if not _inside(goal[i].outline, WORKSPACE):
             return {"status": "infeasible", "reason": f"'{i}' is out of reach in the goal"}
         for j in ids[k + 1 :]:
             if _gap(goal[i], goal[j]) < -CROWDED:

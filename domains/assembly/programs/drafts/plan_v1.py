@@ -40,6 +40,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
+from toolbox.robot import PLACEMENT, WORKSPACE
 
 DEPTH = 0.035  # extrusion depth of the profiled parts [m]
 ON_GAP = 0.008  # a goal part at most this far above its support rests on it [m]
@@ -48,14 +49,6 @@ SAME_ANGLE = np.radians(4.0)
 TILT = np.radians(20.0)  # a goal orientation farther than this from every resting pose
 GOAL_OVERLAP = 0.003  # goal parts may interpenetrate this much (perception noise) [m]
 TOUCH = 0.001  # a placement may touch others this deep [m]
-# temporary places: the robot's comfortable reach in front of it [m]
-REGION_X = (0.32, 0.68)
-REGION_Y = (-0.27, 0.27)
-REACH = 0.72
-# the reachable workspace: no part of a goal may leave it [m]
-WORK_X = (0.25, 0.75)
-WORK_Y = (-0.35, 0.35)
-WORK_REACH = 0.78
 GRID = 0.01  # spacing of candidate temporary places [m]
 CLEARANCES = ((0.03, 0.01), (0.015, 0.005), (0.008, 0.0))  # (to parts, to unbuilt goals) [m]
 
@@ -155,13 +148,13 @@ def _footprint(mesh, T):
     return (pts @ T[:3, :3].T + T[:3, 3])[:, :2]
 
 
-def _in_region(xy, x, y, reach):
+def _in_region(xy, region):
     return bool(
-        (xy[:, 0] >= x[0]).all()
-        and (xy[:, 0] <= x[1]).all()
-        and (xy[:, 1] >= y[0]).all()
-        and (xy[:, 1] <= y[1]).all()
-        and (np.linalg.norm(xy, axis=1) <= reach).all()
+        (xy[:, 0] >= region.x[0]).all()
+        and (xy[:, 0] <= region.x[1]).all()
+        and (xy[:, 1] >= region.y[0]).all()
+        and (xy[:, 1] <= region.y[1]).all()
+        and (np.linalg.norm(xy, axis=1) <= region.reach).all()
     )
 
 
@@ -244,7 +237,7 @@ def _snap_goal(goal, mesh):
         a, b, depth = hits[0]
         return None, f"'{a}' and '{b}' overlap by {1000 * depth:.0f} mm in the goal"
     for i, T in placed.items():
-        if not _in_region(_footprint(mesh[i], T), WORK_X, WORK_Y, WORK_REACH):
+        if not _in_region(_footprint(mesh[i], T), WORKSPACE):
             return None, f"'{i}' is out of the robot's reach in the goal"
     bad = unstable_objects(recs, SHAPES, contact_tol=0.002, margin=-0.002)
     if bad:
@@ -343,15 +336,15 @@ def _temporary(world, i, pending):
     mesh = world.mesh[i]
     T0 = world.poses[i].copy()
     T0[2, 3] -= _lowest(mesh, T0)
-    xs = np.arange(REGION_X[0], REGION_X[1] + 1e-9, GRID)
-    ys = np.arange(REGION_Y[0], REGION_Y[1] + 1e-9, GRID)
+    xs = np.arange(PLACEMENT.x[0], PLACEMENT.x[1] + 1e-9, GRID)
+    ys = np.arange(PLACEMENT.y[0], PLACEMENT.y[1] + 1e-9, GRID)
     cand = np.array([(x, y) for x in xs for y in ys])
     order = np.argsort(np.linalg.norm(cand - T0[:2, 3], axis=1), kind="stable")
     for clearance, goal_clearance in CLEARANCES:
         for k in order:
             T = T0.copy()
             T[:2, 3] = cand[k]
-            if not _in_region(_footprint(mesh, T), REGION_X, REGION_Y, REACH):
+            if not _in_region(_footprint(mesh, T), PLACEMENT):
                 continue
             if world.hits(i, T, clearance=clearance):
                 continue
