@@ -189,13 +189,16 @@ def test_bytes_written_after_an_answer_are_refused_at_the_next_call(docker_execu
         "    return 3\n"
     )
     with docker_executor.open_session(Program(modules={"prog": source})) as session:
-        first = session.call("prog", "f", timeout_s=5)
-        second = session.call("prog", "f", timeout_s=5)
-        third = session.call("prog", "f", timeout_s=5)
+        reports = [session.call("prog", "f", timeout_s=5)]
+        while reports[-1].ok and len(reports) < 8:
+            reports.append(session.call("prog", "f", timeout_s=5))
+    first, *later, last = reports
     assert first.ok and first.value == 1, first
-    # The extra frame is refused once it has arrived: at the next call, or — when the draft's
-    # process was slower to write it than the host to send that call — the one after, which
-    # then took the extra frame as its answer (one the draft could have returned anyway).
-    assert third.verdict == "closed", (second, third)
-    assert second.verdict in ("bad_output", "closed") or (second.ok and second.value == 2), second
-    assert "out of turn" in (second.detail if not second.ok else third.detail), (second, third)
+    # Every call writes three frames and the host takes one per call, so extra frames pile up
+    # and are refused once they have arrived before a call is sent. A draft process slower to
+    # write them than the host to send the next call gets its extra frame taken as that call's
+    # answer instead (one the draft could have returned anyway); on a loaded machine that can
+    # happen a few calls running, never for ever.
+    assert last.verdict in ("bad_output", "closed"), reports
+    assert all(r.ok and r.value in (1, 2, 3) for r in later), reports
+    assert "out of turn" in last.detail, reports

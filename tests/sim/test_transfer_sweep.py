@@ -1,0 +1,36 @@
+"""The arm along whole construction orders (`benchmarks.transfer_sweep`; the long sweeps are a
+benchmark): a dev instance's order plans through, and a step the arm cannot make is refused
+and named."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import domains
+from benchmarks.transfer_sweep import planner, sweep, walk
+from sim.trials import OraclePolicy
+
+
+@pytest.fixture(scope="module")
+def cubes():
+    d = domains.load("cubes")
+    return d, d.benchmark("dev")[0]
+
+
+def test_a_dev_order_plans_through(cubes):
+    d, instance = cubes
+    n, planned, refused = sweep(d, iter([instance]))
+    assert (n, refused) == (1, [])
+    assert planned == len(instance.order) > 0
+
+
+def test_a_target_out_of_reach_is_refused_at_its_step(cubes):
+    d, instance = cubes
+    steps = OraclePolicy().solve_from_truth(instance, d).plan["steps"]
+    steps[-1]["target_pose"] = np.array(steps[-1]["target_pose"], float)
+    steps[-1]["target_pose"][:2, 3] = (1.2, 0.0)  # beyond the arm's reach
+    done, why = walk(d, instance.start["objects"], steps, planner())
+    assert done == len(steps) - 1
+    assert why is not None and why.startswith(f"step {done} ({steps[-1]['object']}): ")
+    assert "unreachable" in why or "no_grasp" in why
