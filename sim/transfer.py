@@ -265,19 +265,19 @@ class TransferPlanner:
         near[2, 3] += c.final_approach
         lifted = grasp.pick_tcp.copy()
         lifted[2, 3] = z
-        turn = None
+        # The transfer turns about the vertical, by the short yaw or the long way round. Both
+        # are explicit turns: the geodesic of a half turn has no preferred side (nor, with a
+        # small tilt left over, a vertical axis), so it may take the long way's side and
+        # swing the wrist into the limit the long way avoids.
+        R = above[:3, :3] @ lifted[:3, :3].T
+        turn = float(np.arctan2(R[1, 0], R[0, 0]))
         if long_way:
-            R = above[:3, :3] @ lifted[:3, :3].T
-            short = float(np.arctan2(R[1, 0], R[0, 0]))
-            turn = short - np.copysign(2 * np.pi, short)
+            turn -= np.copysign(2 * np.pi, turn)
         return [
             Segment(
                 label="transferring",
                 goal=above,
-                duration=max(
-                    self.duration(lifted, above, c.move_speed),
-                    0.0 if turn is None else abs(turn) / c.turn_speed,
-                ),
+                duration=max(self.duration(lifted, above, c.move_speed), abs(turn) / c.turn_speed),
                 turn=turn,
             ),
             Segment(
