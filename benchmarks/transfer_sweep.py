@@ -6,9 +6,11 @@ the joint-space alternatives — from where the previous step left the arm.
 `benchmarks.reach_sweep` asks whether each pose alone has a reachable grasp from the ready
 posture; a trial reaches each pick and place from the configuration the last transfer ended in,
 among other objects. This walks those chains on many more dev-side instances than trials can
-(seconds per instance instead of a minute): a refusal here (`unreachable`, `no_grasp`) is the
-failure a trial meets at that step, before any physics. Physics can only add failures; the
-in-hand correction moves a place by tenths of a millimetre, which this leaves out.
+(seconds per instance instead of a minute). A refusal here (`unreachable`, `no_grasp`) is a
+step where the executor's planner gives up from that arm configuration. A trial's chain
+differs by the in-hand corrections (tenths of a millimetre at each place), which can tip a
+marginal step either way, so a refusal marks a fragile step rather than a certain trial
+failure: the two found on fresh assembly draws (seeds 60090, 60337) passed as trials.
 
 Usage:
     python -m benchmarks.transfer_sweep [--domain assembly] [--dev]
@@ -116,6 +118,8 @@ def sweep(domain: Any, chosen: Iterator) -> tuple[int, int, list[str]]:
         if why is not None:
             refused.append(f"{instance.name}: {why}")
             print(refused[-1], file=sys.stderr, flush=True)
+        if n % 25 == 0:
+            print(f"… {n} instances, {planned} steps, {len(refused)} refused", file=sys.stderr)
     return n, planned, refused
 
 
