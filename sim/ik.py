@@ -3,8 +3,9 @@
 Design rule: the IK works on its own kinematic model of the robot alone (built by
 `sim.robot.build_robot_spec`, the same elements and names as in any scene), never on the
 physics model, so planning can run ahead of the simulation without touching its state. The
-QP has a frame task on the TCP site, a light posture task towards `READY_QPOS`, the gripper's
-DOFs frozen by an equality constraint, and the arm's joint and velocity limits.
+QP has a frame task on the TCP site, a light posture task towards `READY_QPOS` on the first
+six joints (not the wrist: see `ArmIK`), the gripper's DOFs frozen by an equality constraint,
+and the arm's joint and velocity limits.
 
 Two uses: `track` follows a Cartesian path tick by tick, as the executor does while it runs,
 and `solve` iterates on one target until it converges or stalls (a reachability test).
@@ -52,8 +53,16 @@ class IKSolution:
 class ArmIK:
     """mink differential IK for the FR3's TCP.
 
+    The posture task leaves the wrist (joint 7) alone. With the gripper pointing down, the
+    wrist's angle follows from the grasp's yaw and the other joints; a posture pull on it, when
+    a grasp or a long transfer has turned it far from READY's, moves the arm along its
+    self-motion instead, on every tick of a Cartesian move whose frame task it does not
+    disturb: one descent and retreat onto a place with the wrist near its limit wound joints 1,
+    3 and 5 by up to 1.9 rad, and the next move above an object had no IK solution (assembly
+    dev draws 60337 and 61253, `benchmarks.transfer_sweep`).
+
     Args:
-        posture_cost: weight of the posture task relative to the frame task.
+        posture_cost: weight of the posture task on joints 1–6 relative to the frame task.
         limit_margin: distance kept from the joint limits [rad].
     """
 
@@ -68,7 +77,9 @@ class ArmIK:
         self.frame_task = mink.FrameTask(
             robot.TCP_SITE, "site", position_cost=1.0, orientation_cost=0.5, lm_damping=1e-6
         )
-        self.posture_task = mink.PostureTask(model, cost=posture_cost)
+        cost = np.zeros(model.nv)
+        cost[self._arm_dof[:6]] = posture_cost
+        self.posture_task = mink.PostureTask(model, cost=cost)
         q_ready = np.zeros(model.nq)
         q_ready[self._arm_qpos] = robot.READY_QPOS
         self.posture_task.set_target(q_ready)

@@ -380,6 +380,18 @@ def test_a_half_turn_transfer_goes_each_way_round_once(noise):
     assert turns[0] == pytest.approx(-turns[1])
 
 
+def _walk_a_dev_draw(seed: int) -> tuple[int, tuple[int, str | None]]:
+    import domains
+    from benchmarks.transfer_sweep import planner, walk
+    from sim.settle import physical_problems
+    from sim.trials import OraclePolicy
+
+    domain = domains.load("assembly")
+    instance = domain.generate(seed, physics=physical_problems, split="dev")
+    steps = OraclePolicy().solve_from_truth(instance, domain).plan["steps"]
+    return len(steps), walk(domain, instance.start["objects"], steps, planner())
+
+
 @pytest.mark.slow
 def test_a_dev_draw_whose_beam_turns_half_round_plans_through():
     # a fresh dev draw, found by `python -m benchmarks.transfer_sweep --seed 60000`: step 2
@@ -387,15 +399,19 @@ def test_a_dev_draw_whose_beam_turns_half_round_plans_through():
     # step 1 left the arm in. Which side a geodesic half turn takes depends on the poses' last
     # bits (the same draw read back from its JSON file planned through), so the draw is made
     # here, as the sweep made it.
-    import domains
-    from benchmarks.transfer_sweep import planner, walk
-    from sim.settle import physical_problems
-    from sim.trials import OraclePolicy
+    n, walked = _walk_a_dev_draw(60090)
+    assert walked == (n, None)
 
-    domain = domains.load("assembly")
-    instance = domain.generate(60090, physics=physical_problems, split="dev")
-    steps = OraclePolicy().solve_from_truth(instance, domain).plan["steps"]
-    assert walk(domain, instance.start["objects"], steps, planner()) == (len(steps), None)
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [60337, 61253])
+def test_a_dev_draw_whose_place_leaves_the_wrist_at_its_limit_plans_through(seed):
+    # fresh dev draws, found by `python -m benchmarks.transfer_sweep --seed 60000` and
+    # `--seed 61000`: step 7 places a part where every grasp leaves the wrist at its limit;
+    # the IK's posture pull on the wrist wound the arm up along the descent and the retreat,
+    # and step 8's move above the next part ran 400 mm short.
+    n, walked = _walk_a_dev_draw(seed)
+    assert walked == (n, None)
 
 
 def test_turn_poses_go_the_long_way_round_and_end_on_the_goal():

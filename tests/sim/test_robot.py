@@ -193,3 +193,30 @@ def test_ik_step_keeps_the_gripper_frozen_and_respects_velocity_limits():
     index = robot.RobotIndex.from_model(ik.model)
     gripper_q = np.delete(ik.configuration.q, index.arm_qpos)
     assert gripper_q == pytest.approx(np.delete(ik._q, index.arm_qpos))
+
+
+@pytest.mark.parametrize("side", [-1.0, 1.0])
+def test_a_vertical_move_with_the_wrist_turned_far_does_not_wind_up_the_arm(side):
+    # The wrist turned 0.08 rad short of a limit (as a grasp or a long transfer may leave it):
+    # a descent by 23 cm and back needs no joint but 2, 4 and 6. A posture pull on the wrist
+    # used to move the arm along its self-motion instead, winding joints 1, 3 and 5 by up to
+    # 1.4 rad (assembly dev draws 60337 and 61253 then found no way to the next object).
+    from sim._motion import Segment, plan_segments
+
+    ik = ArmIK()
+    lo, hi = robot.RobotIndex.from_model(ik.model).arm_range[6]
+    q0 = robot.READY_QPOS.copy()
+    q0[6] = hi - 0.08 if side > 0 else lo + 0.08
+    T = ik.fk(q0)
+    down = T.copy()
+    down[2, 3] = T[2, 3] - 0.23
+    planned = plan_segments(
+        ik,
+        q0,
+        [Segment(label="down", goal=down, duration=2.0), Segment(label="up", goal=T, duration=2.0)],
+        0.02,
+    )
+    assert isinstance(planned, list), planned
+    qs = np.concatenate([p.q for p in planned])
+    drift = np.abs(qs - q0).max(axis=0)
+    assert drift[[0, 2, 4, 6]] == pytest.approx(0.0, abs=0.05), np.round(drift, 2)
