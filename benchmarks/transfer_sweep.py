@@ -10,7 +10,8 @@ among other objects. This walks those chains on many more dev-side instances tha
 step where the executor's planner gives up from that arm configuration. A trial's chain
 differs by the in-hand corrections (tenths of a millimetre at each place), which can tip a
 marginal step either way, so a refusal marks a fragile step rather than a certain trial
-failure: the two found on fresh assembly draws (seeds 60090, 60337) passed as trials.
+failure: the three found on fresh assembly draws (seeds 60090, 60337, 61253; each fixed since,
+tests/sim/test_executor.py) passed as trials where tried (60090, 60337).
 
 Usage:
     python -m benchmarks.transfer_sweep [--domain assembly] [--dev]
