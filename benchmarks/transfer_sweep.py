@@ -79,6 +79,7 @@ def walk(
                 target @ symmetries[oid][chosen.grasp.symmetry],
                 chosen.transfer_z,
                 long_way=chosen.long_way,
+                transfer_q=chosen.transfer_q,
             )
         except TransferAbort as abort:
             return k, f"step {k} ({oid}): {abort.kind} at the {abort.phase}: {abort.reason}"

@@ -223,7 +223,7 @@ class Executor:
                 )
             except TransferAbort as abort:
                 raise _StepAbort(abort.kind, abort.phase, abort.reason, abort.grasp) from None  # type: ignore[arg-type]
-            grasp, transfer_z, long_way = chosen.grasp, chosen.transfer_z, chosen.long_way
+            grasp, transfer_z = chosen.grasp, chosen.transfer_z
             self._run_phase("approach", chosen.pick[:-3])
             self._mark("close")
             if weld is not None:
@@ -234,7 +234,14 @@ class Executor:
             self._check_hold(grasp, "lift")
             self._settle(self.config.measure_settle)
             T_place = target @ self.symmetries[oid][grasp.symmetry]
-            place = self._place(grasp, T_place, transfer_z, oid, long_way=long_way)
+            place = self._place(
+                grasp,
+                T_place,
+                transfer_z,
+                oid,
+                long_way=chosen.long_way,
+                transfer_q=chosen.transfer_q,
+            )
             self._run_phase("transfer", place[:1])
             self._settle(self.config.measure_settle)
             self._check_hold(grasp, "transfer", dropped=True)
@@ -333,6 +340,7 @@ class Executor:
         *,
         skip: int = 0,
         long_way: bool = False,
+        transfer_q: np.ndarray | None = None,
     ) -> list[PlannedSegment]:
         try:
             return self.transfers.place_segments(
@@ -343,6 +351,7 @@ class Executor:
                 in_hand=self._in_hand(oid, grasp),
                 skip=skip,
                 long_way=long_way,
+                transfer_q=transfer_q,
             )
         except TransferAbort as abort:
             raise _StepAbort(abort.kind, abort.phase, abort.reason, abort.grasp or grasp) from None  # type: ignore[arg-type]

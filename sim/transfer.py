@@ -8,7 +8,7 @@ joints). An unreachable waypoint is found here, before the arm moves.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +39,7 @@ class Chosen:
     pick: list[PlannedSegment]
     transfer_z: float  # TCP height of the transfer [m]
     long_way: bool  # the transfer turns the wrist the long way round
+    transfer_q: np.ndarray | None = None  # (7,) the transfer is a joint move to these joints
 
 
 class TransferPlanner:
@@ -66,7 +67,8 @@ class TransferPlanner:
 
         Per grasp, best first: Cartesian moves all along; the transfer turning the wrist the
         long way round; then the move above the object in joint space (`_through_joint_space`),
-        with either transfer."""
+        with either transfer. Only when no grasp has any of these, the grasps again, best
+        first, with the transfer in joint space (`_joint_transfer`)."""
         report = plan_grasps(
             mesh,
             T_pick,
@@ -110,6 +112,28 @@ class TransferPlanner:
                         transfer_z=transfer_z,
                         long_way=long_way,
                     )
+        for grasp in candidates[: c.max_grasp_candidates]:
+            transfer_z = self._transfer_height(mesh, grasp, T_pick, tops)
+            segments = self.pick_segments(q_cmd, grip_cmd, grasp, transfer_z)
+            cartesian = plan_segments(self.ik, q_cmd, segments, self.tick_dt)
+            pick = (
+                self._through_joint_space(q_cmd, segments, [])
+                if isinstance(cartesian, PlanFailure)
+                else cartesian
+            )
+            if pick is None:
+                continue
+            floor = max([*tops, 0.0]) + c.clearance / 2
+            held = np.vstack([np.asarray(mesh.vertices), _fingertips(grasp)])
+            q_goal = self._joint_transfer(pick[-1].q[-1], grasp, held, floor, transfer_z)
+            if q_goal is not None:
+                return Chosen(
+                    grasp=grasp,
+                    pick=pick,
+                    transfer_z=transfer_z,
+                    long_way=False,
+                    transfer_q=q_goal,
+                )
         assert first_failure is not None
         raise TransferAbort(
             "unreachable",
@@ -152,7 +176,6 @@ class TransferPlanner:
         further) or the descent from it does. Seeds turn the wrist a quarter or a half turn
         either way from READY; the joint move must keep the TCP within 2 cm of the transfer
         height. None when no seed gives a plan."""
-        c = self.config
         k = next(i for i, seg in enumerate(segments) if seg.label == "moving above the object")
         before = plan_segments(self.ik, q_cmd, segments[:k], self.tick_dt)
         if isinstance(before, PlanFailure):
@@ -161,25 +184,11 @@ class TransferPlanner:
         above = segments[k].goal
         assert above is not None
         z_low = min(self.ik.fk(q_from)[2, 3], above[2, 3]) - 0.02
-        lo, hi = self.wrist
-        for turn in (0.0, -np.pi / 2, np.pi / 2, -np.pi, np.pi):
-            seed = robot.READY_QPOS.copy()
-            seed[0] = np.arctan2(above[1, 3], above[0, 3])
-            seed[6] = np.clip(seed[6] + turn, lo + 0.1, hi - 0.1)
-            sol = self.ik.solve(above, seed)
-            if not sol.ok:
-                continue
-            far = float(np.max(np.abs(sol.q - q_from)))
-            n = max(2, int(np.ceil(far / 0.02)))
-            path = q_from + np.linspace(0.0, 1.0, n)[:, None] * (sol.q - q_from)
-            if min(self.ik.fk(q)[2, 3] for q in path) < z_low:
-                continue  # the joint move would dip towards the objects
-            joint_move = Segment(
-                label=segments[k].label,
-                q_goal=sol.q,
-                duration=max(c.min_move_time, far / c.joint_speed),
-                grip=segments[k].grip,
-            )
+
+        def high(tcps: np.ndarray) -> bool:  # the move must not dip towards the objects
+            return bool(tcps[:, 2, 3].min() >= z_low)
+
+        for joint_move in self._joint_moves(q_from, segments[k], high):
             planned = plan_segments(
                 self.ik,
                 q_cmd,
@@ -189,6 +198,63 @@ class TransferPlanner:
             if not isinstance(planned, PlanFailure):
                 return planned
         return None
+
+    def _joint_transfer(
+        self, q_from: np.ndarray, grasp: Grasp, held: np.ndarray, floor: float, z: float
+    ) -> np.ndarray | None:
+        """The joints of a transfer made in joint space from the end of the lift (`q_from`) to
+        a fresh IK solution above the target, from which the rest of the place plans: for when
+        every Cartesian transfer ends where the descent cannot go on (typically with the wrist
+        at its limit, where the descent needs it to turn further). Seeds as
+        `_through_joint_space`; all along the move every point of `held` (the object's vertices
+        and the fingertips, in the object's frame) must stay above `floor` [m] (half the
+        clearance over the believed objects' tops: the move may swing and tilt the hand). None
+        when no seed gives a plan."""
+        motion = self.place_motion(grasp, grasp.place_tcp, z)
+        T_tcp_object = se3.inverse(grasp.T_object_tcp)
+        points = np.c_[held, np.ones(len(held))] @ T_tcp_object.T  # (n, 4) in the TCP frame
+
+        def clear(tcps: np.ndarray) -> bool:
+            return bool((tcps[:, 2, :] @ points.T).min() >= floor)
+
+        for joint_move in self._joint_moves(q_from, motion[0], clear):
+            planned = plan_segments(self.ik, q_from, [joint_move, *motion[1:]], self.tick_dt)
+            if not isinstance(planned, PlanFailure):
+                return joint_move.q_goal
+        return None
+
+    def _joint_moves(
+        self, q_from: np.ndarray, move: Segment, ok: Callable[[np.ndarray], bool]
+    ) -> Iterator[Segment]:
+        """`move` (a Cartesian segment) as joint moves from `q_from` to fresh IK solutions of
+        its goal, seeded with READY turned towards it and the wrist a quarter or a half turn
+        either way; only those whose TCP poses along the way (n, 4, 4) are `ok`."""
+        goal = move.goal
+        assert goal is not None
+        lo, hi = self.wrist
+        for turn in (0.0, -np.pi / 2, np.pi / 2, -np.pi, np.pi):
+            seed = robot.READY_QPOS.copy()
+            seed[0] = np.arctan2(goal[1, 3], goal[0, 3])
+            seed[6] = np.clip(seed[6] + turn, lo + 0.1, hi - 0.1)
+            sol = self.ik.solve(goal, seed)
+            if not sol.ok:
+                continue
+            far = float(np.max(np.abs(sol.q - q_from)))
+            n = max(2, int(np.ceil(far / 0.02)))
+            path = q_from + np.linspace(0.0, 1.0, n)[:, None] * (sol.q - q_from)
+            if ok(np.array([self.ik.fk(q) for q in path])):
+                yield self._joint_segment(q_from, sol.q, move)
+
+    def _joint_segment(self, q_from: np.ndarray, q_goal: np.ndarray, move: Segment) -> Segment:
+        """`move` made as a joint move from `q_from` to `q_goal` at the joint speed."""
+        c = self.config
+        far = float(np.max(np.abs(q_goal - q_from)))
+        return Segment(
+            label=move.label,
+            q_goal=q_goal,
+            duration=max(c.min_move_time, far / c.joint_speed),
+            grip=move.grip,
+        )
 
     # -- segments ----------------------------------------------------------------------------
 
@@ -310,11 +376,14 @@ class TransferPlanner:
         in_hand: np.ndarray | None = None,
         skip: int = 0,
         long_way: bool = False,
+        transfer_q: np.ndarray | None = None,
     ) -> list[PlannedSegment]:
         """Plan the place from the arm's command `q_cmd`, corrected for the object's pose in the
         hand when there is an estimate of it (`in_hand`: T_tcp_object): from after the lift, or
         with `skip` 1 from above the target, 2 from the end of the descent (`final_approach`
-        above the release). `T_place` is the target with the grasp's symmetry applied."""
+        above the release). `T_place` is the target with the grasp's symmetry applied; the
+        transfer turns the long way round with `long_way`, or is a joint move to `transfer_q`
+        (as `choose` chose)."""
         candidates = []
         if in_hand is not None and self.config.in_hand_correction:
             corrected = T_place @ se3.inverse(in_hand)
@@ -325,6 +394,8 @@ class TransferPlanner:
         failure: PlanFailure | None = None
         for place_tcp in candidates:
             motion = self.place_motion(grasp, place_tcp, z, long_way)
+            if transfer_q is not None and skip == 0:
+                motion[0] = self._joint_segment(q_cmd, transfer_q, motion[0])
             planned = plan_segments(self.ik, q_cmd, motion[skip:], self.tick_dt)
             if not isinstance(planned, PlanFailure):
                 return planned
@@ -337,6 +408,13 @@ class TransferPlanner:
         dist = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3]))
         angle = se3.rotation_angle(T0[:3, :3].T @ T1[:3, :3])
         return max(c.min_move_time, dist / speed, angle / c.turn_speed)
+
+
+def _fingertips(grasp: Grasp) -> np.ndarray:
+    """The two fingertips (2, 3) at the grasp's width, in the held object's frame."""
+    depth = STROKE.tip_at_gap(grasp.width)
+    tips = np.array([[0.0, -grasp.width / 2, depth, 1.0], [0.0, grasp.width / 2, depth, 1.0]])
+    return (tips @ grasp.T_object_tcp.T)[:, :3]
 
 
 def _world_vertices(mesh: trimesh.Trimesh, T: np.ndarray) -> np.ndarray:

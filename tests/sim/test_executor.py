@@ -333,12 +333,12 @@ def _asymmetric(x: float, y: float, yaw: float) -> Executor:
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("yaw", "turn", "how"),
-    [(0.0, 159.0, "long way"), (50.0, -170.0, "joint space")],
+    [(0.0, 159.0, "long way"), (140.0, 145.0, "joint space")],
     ids=["transfer-turns-the-long-way", "approach-in-joint-space"],
 )
 def test_a_turn_the_wrist_cannot_take_the_short_way(yaw, turn, how):
-    # beside the robot on its left, turned by ~160° on the way to the right: the geodesic wrist
-    # turn runs joint 7 into its limit from the configuration the move starts in
+    # beside the robot on its left, turned by 145–160° on the way to the right: the geodesic
+    # wrist turn runs joint 7 into its limit from the configuration the move starts in
     target = _at(0.5, -0.2, yaw=np.radians(yaw + turn))
     ex = _asymmetric(0.36, 0.24, np.radians(yaw))
     ex._unpark()
@@ -412,6 +412,51 @@ def test_a_dev_draw_whose_place_leaves_the_wrist_at_its_limit_plans_through(seed
     # and step 8's move above the next part ran 400 mm short.
     n, walked = _walk_a_dev_draw(seed)
     assert walked == (n, None)
+
+
+@pytest.mark.slow
+def test_a_place_the_cartesian_transfers_leave_out_of_reach_is_made_with_a_joint_transfer():
+    # dev goal10_start1, step 0: for the L-block's best grasp the short transfer runs 16 mm
+    # off, and the long one ends with the wrist at its limit, from where the descent runs 34 mm
+    # off (the planner fell back to the third grasp). Allowed that one grasp only, the planner
+    # carries the block in joint space to a fresh IK solution above its place; the trial
+    # succeeds in the simulator.
+    import domains
+    from benchmarks.transfer_sweep import planner
+    from sim.transfer import TransferPlanner, _fingertips, obstacles
+    from sim.trials import OraclePolicy, run_trial
+
+    domain = domains.load("assembly")
+    instance = next(i for i in domain.benchmark("dev") if i.name == "goal10_start1")
+    config = ExecutorConfig(max_grasp_candidates=1)
+    executors = planner()
+    transfers = TransferPlanner(executors.ik, config, executors.wrist, executors.tick_dt)
+    step = OraclePolicy().solve_from_truth(instance, domain).plan["steps"][0]
+    records = {r["id"]: r for r in instance.start["objects"]}
+    belief = {o: np.asarray(r["pose"], float) for o, r in records.items()}
+    meshes = {o: domain.mesh(r["mesh"]) for o, r in records.items()}
+    oid = step["object"]
+    chosen = transfers.choose(
+        robot.READY_QPOS,
+        robot.GRIPPER_OPEN,
+        meshes[oid],
+        list(domain.symmetries(records[oid]["mesh"])),
+        belief[oid],
+        np.asarray(step["target_pose"], float),
+        obstacles(belief, meshes, oid),
+    )
+    assert chosen.transfer_q is not None
+    # the held block and the fingertips are kept clear along that move: not above the
+    # transfer height itself, which they hang below
+    held = np.vstack([meshes[oid].vertices, _fingertips(chosen.grasp)])
+    q_lift = chosen.pick[-1].q[-1]
+    for floor, found in ((chosen.transfer_z, False), (-1.0, True)):
+        q = transfers._joint_transfer(q_lift, chosen.grasp, held, floor, chosen.transfer_z)
+        assert (q is not None) == found
+
+    result = run_trial(domain, instance, OraclePolicy(), config=config)
+    assert result.final_ok, result.failure
+    assert result.steps[0]["ok"] and result.steps[0]["position_error"] < 0.002
 
 
 def test_turn_poses_go_the_long_way_round_and_end_on_the_goal():
