@@ -15,10 +15,13 @@ tests/sim/test_executor.py) passed as trials where tried (60090, 60337).
 
 Usage:
     python -m benchmarks.transfer_sweep [--domain assembly] [--dev]
-        [--seed S | --composed S] [--count N]
+        [--seed S | --composed S] [--count N] [--grasps K]
 `--dev`: the dev benchmark's 60 instances; `--seed S`: N fresh dev draws from seed S (as
 `rivet eval --seed`); `--composed S`: the composed goals of seeds S, S+1, … (as `rivet eval
---composed`, N seeds tried). Prints each refusal and the totals; exit 1 when there is one.
+--composed`, N seeds tried); `--grasps K`: at most K grasp candidates a step, a stress test of
+the fallbacks (long way, joint-space approach, joint-space transfer) that the best grasps
+rarely need. Prints each refusal and the totals, with how the planned steps go; exit 1 when
+there is a refusal.
 """
 
 from __future__ import annotations
@@ -26,7 +29,9 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -36,15 +41,17 @@ from domains.errors import GenerationError
 from sim import robot
 from sim.execution import ExecutorConfig
 from sim.ik import ArmIK
-from sim.transfer import TransferAbort, TransferPlanner, obstacles
+from sim.transfer import Chosen, TransferAbort, TransferPlanner, obstacles
 from sim.trials import OraclePolicy
 
 
-def planner() -> TransferPlanner:
+def planner(grasps: int | None = None) -> TransferPlanner:
     """The executor's transfer planner, as `sim.executor.Executor` builds it (its tick is the
-    control period)."""
+    control period); with `grasps`, limited to that many grasp candidates a step."""
     ik = ArmIK()
     config = ExecutorConfig()
+    if grasps is not None:
+        config = replace(config, max_grasp_candidates=grasps)
     wrist = tuple(robot.RobotIndex.from_model(ik.model).arm_range[6])
     return TransferPlanner(ik, config, wrist, config.control_dt)
 
@@ -54,9 +61,11 @@ def walk(
     start: Sequence[Mapping],
     steps: Sequence[Mapping],
     transfers: TransferPlanner,
+    ways: Counter[str] | None = None,
 ) -> tuple[int, str | None]:
     """(steps planned, the first refusal described or None) for `steps` from `start` (records),
-    the arm starting at READY, each moved object then believed at its target."""
+    the arm starting at READY, each moved object then believed at its target. Counts into
+    `ways` how each planned step goes (`way`)."""
     meshes = {r["id"]: domain.mesh(r["mesh"]) for r in start}
     symmetries = {r["id"]: list(domain.symmetries(r["mesh"])) for r in start}
     belief = {r["id"]: np.asarray(r["pose"], float) for r in start}
@@ -85,7 +94,20 @@ def walk(
             return k, f"step {k} ({oid}): {abort.kind} at the {abort.phase}: {abort.reason}"
         q = place[-1].q[-1]
         belief[oid] = target
+        if ways is not None:
+            ways[way(chosen)] += 1
     return len(steps), None
+
+
+def way(chosen: Chosen) -> str:
+    """How a chosen transfer goes: `cartesian` all along, the transfer the `long way` round,
+    the move above the object in joint space (`joint approach`), or the transfer in joint
+    space (`joint transfer`, the last resort)."""
+    if chosen.transfer_q is not None:
+        return "joint transfer"
+    if any(p.segment.q_goal is not None for p in chosen.pick):
+        return "joint approach"
+    return "long way" if chosen.long_way else "cartesian"
 
 
 def instances(domain: Any, *, dev: bool, seed: int | None, composed: int | None, count: int):
@@ -107,15 +129,21 @@ def instances(domain: Any, *, dev: bool, seed: int | None, composed: int | None,
                 yield instance
 
 
-def sweep(domain: Any, chosen: Iterator) -> tuple[int, int, list[str]]:
-    """(instances, steps planned, refusals described) over `chosen` instances."""
-    transfers = planner()
+def sweep(
+    domain: Any,
+    chosen: Iterator,
+    grasps: int | None = None,
+    ways: Counter[str] | None = None,
+) -> tuple[int, int, list[str]]:
+    """(instances, steps planned, refusals described) over `chosen` instances, with at most
+    `grasps` grasp candidates a step; how the steps go is counted into `ways`."""
+    transfers = planner(grasps)
     n = planned = 0
     refused = []
     for instance in chosen:
         n += 1
         steps = OraclePolicy().solve_from_truth(instance, domain).plan["steps"]
-        done, why = walk(domain, instance.start["objects"], steps, transfers)
+        done, why = walk(domain, instance.start["objects"], steps, transfers, ways)
         planned += done
         if why is not None:
             refused.append(f"{instance.name}: {why}")
@@ -133,6 +161,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     source.add_argument("--seed", type=int, help="fresh dev draws from this seed")
     source.add_argument("--composed", type=int, help="composed goals from this seed")
     ap.add_argument("--count", type=int, default=100, help="draws or seeds tried [100]")
+    ap.add_argument(
+        "--grasps",
+        type=int,
+        metavar="K",
+        help="at most K grasp candidates a step (the executor tries "
+        f"{ExecutorConfig().max_grasp_candidates}); fewer makes the fallbacks carry more steps",
+    )
     args = ap.parse_args(argv)
     if not (args.dev or args.seed is not None or args.composed is not None):
         ap.error("choose --dev, --seed S or --composed S")
@@ -141,9 +176,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     chosen = instances(
         domain, dev=args.dev, seed=args.seed, composed=args.composed, count=args.count
     )
-    n, planned, refused = sweep(domain, chosen)
+    ways: Counter[str] = Counter()
+    n, planned, refused = sweep(domain, chosen, args.grasps, ways)
+    how = ", ".join(f"{k} {v}" for k, v in ways.most_common())
     print(
-        f"{args.domain}: {n} instances, {planned} steps planned, {len(refused)} refused "
+        f"{args.domain}: {n} instances, {planned} steps planned ({how}), {len(refused)} refused "
         f"({time.perf_counter() - t0:.0f} s)"
     )
     return 1 if refused else 0

@@ -34,3 +34,27 @@ def test_a_target_out_of_reach_is_refused_at_its_step(cubes):
     assert done == len(steps) - 1
     assert why is not None and why.startswith(f"step {done} ({steps[-1]['object']}): ")
     assert "unreachable" in why or "no_grasp" in why
+
+
+def test_every_planned_step_is_counted_by_the_way_it_goes(cubes):
+    from collections import Counter
+
+    d, instance = cubes
+    ways: Counter[str] = Counter()
+    n, planned, refused = sweep(d, iter([instance]), grasps=1, ways=ways)
+    assert refused == [] and sum(ways.values()) == planned
+    assert set(ways) <= {"cartesian", "long way", "joint approach", "joint transfer"}
+
+
+@pytest.mark.slow
+def test_with_one_grasp_a_dev_step_goes_by_a_joint_transfer():
+    # dev goal10_start1, step 0: the L-block's best grasp has no Cartesian transfer the
+    # descent can go on from (tests/sim/test_executor.py has it in the simulator)
+    from collections import Counter
+
+    d = domains.load("assembly")
+    instance = next(i for i in d.benchmark("dev") if i.name == "goal10_start1")
+    ways: Counter[str] = Counter()
+    steps = OraclePolicy().solve_from_truth(instance, d).plan["steps"][:1]
+    assert walk(d, instance.start["objects"], steps, planner(grasps=1), ways) == (1, None)
+    assert ways == {"joint transfer": 1}
