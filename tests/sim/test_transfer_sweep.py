@@ -42,6 +42,7 @@ def test_every_planned_step_is_counted_by_the_way_it_goes(cubes):
     d, instance = cubes
     ways: Counter[str] = Counter()
     n, planned, refused = sweep(d, iter([instance]), grasps=1, ways=ways)
+    assert n == 1
     assert refused == [] and sum(ways.values()) == planned
     assert set(ways) <= {"cartesian", "long way", "joint approach", "joint transfer"}
 
