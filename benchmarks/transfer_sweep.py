@@ -171,6 +171,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if not (args.dev or args.seed is not None or args.composed is not None):
         ap.error("choose --dev, --seed S or --composed S")
+    if args.grasps is not None and args.grasps < 1:
+        ap.error(f"--grasps must be at least 1, not {args.grasps}")
     domain = domains.load(args.domain)
     t0 = time.perf_counter()
     chosen = instances(

@@ -59,3 +59,12 @@ def test_with_one_grasp_a_dev_step_goes_by_a_joint_transfer():
     steps = OraclePolicy().solve_from_truth(instance, d).plan["steps"][:1]
     assert walk(d, instance.start["objects"], steps, planner(grasps=1), ways) == (1, None)
     assert ways == {"joint transfer": 1}
+
+
+def test_the_sweep_refuses_a_grasp_limit_under_one(capsys):
+    from benchmarks.transfer_sweep import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--dev", "--grasps", "0"])
+    assert exit_.value.code == 2
+    assert "--grasps must be at least 1" in capsys.readouterr().err
