@@ -199,8 +199,8 @@ def test_ik_step_keeps_the_gripper_frozen_and_respects_velocity_limits():
 def test_a_vertical_move_with_the_wrist_turned_far_does_not_wind_up_the_arm(side):
     # The wrist turned 0.08 rad short of a limit (as a grasp or a long transfer may leave it):
     # a descent by 23 cm and back needs no joint but 2, 4 and 6. A posture pull on the wrist
-    # used to move the arm along its self-motion instead, winding joints 1, 3 and 5 by up to
-    # 1.4 rad (assembly dev draws 60337 and 61253 then found no way to the next object).
+    # used to move the arm along its self-motion instead, here winding joints 1 and 3 by 0.73
+    # and 0.63 rad (assembly dev draws 60337 and 61253 then found no way to the next object).
     from sim._motion import Segment, plan_segments
 
     ik = ArmIK()
