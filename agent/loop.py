@@ -31,8 +31,8 @@ from agent.extract import (
 from agent.journal import Journal
 from agent.prompt import DomainContext, Feedback, build_request
 from agent.report import report_image
+from checks.report import sanitise_text
 from contracts.functions import CODE_DEPS, authoring_order
-from sandbox.harness.wire import clean_text
 
 
 class Checker(Protocol):
@@ -259,10 +259,10 @@ def _report_images(
                 continue
             data, why = report_image(image.get("path"), images_dir)
             if data is None:
-                refused.append(f"{clean_text(str(check.get('name')))[:100]}: {why}")
+                refused.append(f"{sanitise_text(str(check.get('name')))[:100]}: {why}")
                 continue
             caption = image.get("caption", Path(str(image.get("path"))).name)
             out.append(
-                ImageBlock(png=data, caption=clean_text(f"{check.get('name')}: {caption}")[:300])
+                ImageBlock(png=data, caption=sanitise_text(f"{check.get('name')}: {caption}")[:300])
             )
     return tuple(out), refused

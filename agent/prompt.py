@@ -121,7 +121,9 @@ def build_request(
             )
         )
         for img in feedback.images:
-            content.append(TextBlock(text=img.caption))
+            # the checks' caption (sanitised by the loop) kept on one line: it is never a
+            # Markdown block of its own, whatever it holds
+            content.append(TextBlock(text=img.caption.replace("\n", " ")))
             content.append(img)
     return ModelRequest(
         function=function,

@@ -5,6 +5,11 @@ A check report's image paths are data, not trust: an image is read (here, and by
 the model) only when its path, symlinks resolved, lies inside that check run's own output
 folder and the file is a PNG of sane size (`report_image`); anything else is refused, said
 so where the image would have been, and never read.
+
+Every string of a check report, the feedback the model was sent and the drafts themselves are
+text a draft (or the model) produced: each is sanitised (`checks.report.sanitise_text`:
+invisible and reordering characters such as bidi overrides shown as escapes) and then
+HTML-escaped before it is written, attributes quoted — never markup of its own.
 """
 
 from __future__ import annotations
@@ -18,8 +23,8 @@ import stat
 from pathlib import Path
 
 from agent.journal import Journal
+from checks.report import sanitise_text
 from contracts.functions import FUNCTIONS, authoring_order
-from sandbox.harness.wire import clean_text
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 MAX_IMAGE_BYTES = 16 << 20  # [bytes] an overlay PNG is a few hundred KiB
@@ -48,20 +53,22 @@ def report_image(path: object, folder: Path) -> tuple[bytes | None, str]:
         return None, "the image path is not a path"
     named = Path(path)
     if ".." in named.parts:
-        return None, f"the image path {clean_text(path)[:200]!r} climbs out with '..'"
+        return None, f"the image path {sanitise_text(path)[:200]!r} climbs out with '..'"
     try:
         root = folder.resolve(strict=True)
     except OSError:
         return None, "the check run's output folder does not exist"
     where = [named] if named.is_absolute() else [Path.cwd() / named, folder / named]
-    why = f"the image path {clean_text(path)[:200]!r} names no file in the check run's folder"
+    why = f"the image path {sanitise_text(path)[:200]!r} names no file in the check run's folder"
     for candidate in [*where, folder / named.name]:
         try:
             real = candidate.resolve(strict=True)
         except (OSError, RuntimeError):  # missing, or a symlink loop
             continue
         if not real.is_relative_to(root):
-            why = f"the image path {clean_text(path)[:200]!r} leads outside the check run's folder"
+            why = (
+                f"the image path {sanitise_text(path)[:200]!r} leads outside the check run's folder"
+            )
             continue
         try:
             fd = os.open(real, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
@@ -70,19 +77,28 @@ def report_image(path: object, folder: Path) -> tuple[bytes | None, str]:
         with os.fdopen(fd, "rb") as f:
             info = os.fstat(f.fileno())
             if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_IMAGE_BYTES:
-                why = f"the image {clean_text(path)[:200]!r} is not a PNG file of sane size"
+                why = f"the image {sanitise_text(path)[:200]!r} is not a PNG file of sane size"
                 continue
             data = f.read(MAX_IMAGE_BYTES + 1)
         if len(data) > MAX_IMAGE_BYTES or not data.startswith(PNG_MAGIC):
-            why = f"the image {clean_text(path)[:200]!r} is not a PNG file of sane size"
+            why = f"the image {sanitise_text(path)[:200]!r} is not a PNG file of sane size"
             continue
         return data, ""
     return None, why
 
 
+def _text(value: object, limit: int | None = None) -> str:
+    """Text a draft or a report produced, sanitised, clipped to `limit` characters, then
+    HTML-escaped (quotes included: safe in an attribute too)."""
+    text = sanitise_text(value)
+    if limit is not None and len(text) > limit:
+        text = text[: limit - 1] + "…"
+    return html.escape(text)
+
+
 def _img(data: bytes, name: str) -> str:
     encoded = base64.b64encode(data).decode()
-    return f'<img src="data:image/png;base64,{encoded}" alt="{html.escape(clean_text(name))}">'
+    return f'<img src="data:image/png;base64,{encoded}" alt="{_text(name)}">'
 
 
 def write_report(journal: Journal, title: str) -> Path:
@@ -131,9 +147,10 @@ def write_report(journal: Journal, title: str) -> Path:
                     "<table><tr><th>check</th><th>category</th><th>status</th><th>message</th></tr>"
                 )
                 for c in report["checks"]:
+                    status = _text(c.get("status", ""))
                     out.append(
-                        f"<tr><td>{html.escape(c['name'])}</td><td>{c['category']}</td>"
-                        f"<td class={c['status']}>{c['status']}</td><td>{html.escape(c.get('message', ''))[:400]}</td></tr>"
+                        f"<tr><td>{_text(c.get('name', ''))}</td><td>{_text(c.get('category', ''))}</td>"
+                        f'<td class="{status}">{status}</td><td>{_text(c.get("message", ""), 400)}</td></tr>'
                     )
                 out.append("</table>")
                 for c in report["checks"]:
@@ -142,7 +159,7 @@ def write_report(journal: Journal, title: str) -> Path:
                             continue
                         path = image.get("path")
                         data, why = report_image(path, journal.images_dir(function, k))
-                        label = html.escape(clean_text(f"{c['name']}: {image.get('caption', '')}"))
+                        label = _text(f"{c.get('name')}: {image.get('caption', '')}")
                         if data is None:
                             out.append(
                                 f"<p class=failed>{label}: image refused: {html.escape(why)}</p>"
@@ -152,13 +169,13 @@ def write_report(journal: Journal, title: str) -> Path:
                 md = journal.saved_markdown(function, k)
                 if md and not report["passed"]:
                     out.append(
-                        f"<details><summary>feedback sent to the model</summary><pre>{html.escape(md)}</pre></details>"
+                        f"<details><summary>feedback sent to the model</summary><pre>{_text(md)}</pre></details>"
                     )
             if draft is not None:
                 if previous is not None:
-                    diff = difflib.HtmlDiff(wrapcolumn=90).make_table(
-                        previous.splitlines(),
-                        draft.splitlines(),
+                    diff = difflib.HtmlDiff(wrapcolumn=90).make_table(  # escapes HTML itself
+                        sanitise_text(previous).splitlines(),
+                        sanitise_text(draft).splitlines(),
                         f"attempt {k - 1}",
                         f"attempt {k}",
                         context=True,
@@ -168,7 +185,7 @@ def write_report(journal: Journal, title: str) -> Path:
                     )
                 else:
                     out.append(
-                        f"<details><summary>draft</summary><pre>{html.escape(draft)}</pre></details>"
+                        f"<details><summary>draft</summary><pre>{_text(draft)}</pre></details>"
                     )
                 previous = draft
     path = journal.dir / "report.html"
