@@ -49,7 +49,10 @@ def camera_summary(domain) -> str:
             f"- `{name}` ({role}): {cam['width']}×{cam['height']} px, fx = fy = {K[0, 0]:.1f} px, "
             f"at {list(spec.position)} m looking at {list(spec.target)} m"
         )
-    lines.append("The camera actually used is always passed to `perceive`; do not hard-code it.")
+    lines.append(
+        "The checks and the trials draw their cameras around these (the `perceive` task says "
+        "how); the camera actually used is always passed as `camera`: do not hard-code one."
+    )
     return "\n".join(lines)
 
 

@@ -1,5 +1,9 @@
 """Take the draft out of a model response: exactly one ```python block defining the function.
 
+The draft is the one fence marked ```python (or ```py); fences in other languages (a diagram
+in ```text, a shell line) are not read, and two ```python fences are an error. Only an answer
+with no fence marked Python falls back to its unmarked fences (exactly one of them).
+
 A malformed response is the model's mistake, not the run's: it becomes a check report of
 category `interface` that goes back to the model like any other failure. A response cut off at
 the output limit (`stop_reason: max_tokens`) that holds no usable draft is reported as such
@@ -19,17 +23,23 @@ class DraftFormatError(Exception):
 
 
 def extract_draft(text: str, function: str) -> str:
-    """The source of the single Python code block in `text`, which must define `function`."""
-    blocks = [m for m in _FENCE.finditer(text) if m.group("lang").lower() in ("python", "py", "")]
+    """The source of the one ```python block in `text`, which must define `function`."""
+    fences = list(_FENCE.finditer(text))
+    blocks = [m for m in fences if m.group("lang").lower() in ("python", "py")]
+    marked = bool(blocks)
+    if not marked:
+        blocks = [m for m in fences if not m.group("lang")]
     if not blocks:
         raise DraftFormatError(
-            "your answer holds no ```python code block; answer with exactly one block holding "
-            f"the whole module that defines `{function}`"
+            "your answer holds no ```python code block; answer with exactly one ```python block "
+            f"holding the whole module that defines `{function}`"
         )
     if len(blocks) > 1:
+        kind = "```python" if marked else "unmarked ```"
         raise DraftFormatError(
-            f"your answer holds {len(blocks)} code blocks; answer with exactly one block holding "
-            f"the whole module that defines `{function}`"
+            f"your answer holds {len(blocks)} code blocks ({kind} fences); answer with exactly "
+            f"one ```python block holding the whole module that defines `{function}` (fences in "
+            "other languages, such as a ```text diagram, are not read)"
         )
     source = blocks[0].group("body")
     try:

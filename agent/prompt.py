@@ -5,7 +5,7 @@ system: rules + representation + toolbox documentation            ← cache mark
 user:   domain context (task, what the checks and the robot use,
         cameras, meshes) + reference images                        ← cache mark
         the function's task + what its draft is checked for (every rule of its checks)
-        + frozen sources of its dependencies
+        + the output contracts it consumes + frozen sources of its dependencies
         [repair: previous draft + check report + its images]
 
 `python -m agent.prompt --sizes` prints each prompt's size (`sizes`).
@@ -20,7 +20,7 @@ from importlib import resources
 from string import Template
 
 from agent.clients.base import Block, ImageBlock, ModelRequest, TextBlock
-from contracts.functions import CODE_DEPS, CONTRACT_DEPS, SIGNATURES
+from contracts.functions import CODE_DEPS, CONTRACT_DEPS, FUNCTIONS, SIGNATURES
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -63,6 +63,21 @@ def templates_hash() -> str:
     return h.hexdigest()
 
 
+def frozen_use(function: str, dep: str) -> str:
+    """How `function`'s draft may use its frozen dependency `dep`. A check loads a module
+    beside the frozen modules of its own function's `CODE_DEPS` only (`checks.calls.
+    session_modules`), so `dep` is importable only when every later function whose checks load
+    `function`'s module loads `dep` too."""
+    without = [g for g in FUNCTIONS if function in CODE_DEPS[g] and dep not in CODE_DEPS[g]]
+    if not without:
+        return f"already checked; importable as `from {dep} import {dep}`"
+    names = " or ".join(f"`{g}`" for g in without)
+    return (
+        f"already checked; shown for reference, not to import: when {names} is checked, your "
+        f"`{function}` is loaded without `{dep}` beside it, and the import would fail there"
+    )
+
+
 def build_request(
     ctx: DomainContext,
     function: str,
@@ -100,13 +115,12 @@ def build_request(
         task.append(
             Template(template("checks.md")).substitute(rules=ctx.rules[function].strip()).strip()
         )
-    for dep in CODE_DEPS[function]:
-        task.append(
-            f"## Frozen `{dep}` (already checked; importable as `from {dep} import {dep}`)"
-            f"\n\n```python\n{frozen[dep].rstrip()}\n```"
-        )
     for dep in CONTRACT_DEPS[function]:
-        task.append(f"## Contract of `{dep}`\n\n`{SIGNATURES[dep]}`: see the representation.")
+        contract = template(f"contract_{dep}.md").strip()
+        task.append(f"## Contract of `{dep}`\n\n`{SIGNATURES[dep]}`: {contract}")
+    for dep in CODE_DEPS[function]:
+        task.append(f"## Frozen `{dep}` ({frozen_use(function, dep)})")
+        task[-1] += f"\n\n```python\n{frozen[dep].rstrip()}\n```"
     content.append(TextBlock(text="\n\n".join(task)))
 
     if feedback is not None:

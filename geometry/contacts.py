@@ -187,9 +187,10 @@ def unstable_objects(
     Loads are carried down: an object together with everything that rests only on it
     (directly or through others) must have its joint centre of mass at least `margin` [m]
     inside the convex hull of its contact patches, seen from above (a negative margin allows
-    it that far outside: `TOLERANCES.com_margin`). So a beam on two pillars
-    with a block at one end tips when the block moves the joint centre past a pillar, and a
-    part resting on nothing is reported.
+    it that far outside; the default allows the tolerance table's `com_margin`, which
+    `toolbox.stability` names `COM_MARGIN`). So a beam on two pillars with a block at one end
+    tips when the block moves the joint centre past a pillar, and a part resting on nothing is
+    reported.
     """
     bodies = _posed(records, shapes)
     found = _contacts(bodies, contact_tol)

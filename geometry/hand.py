@@ -190,6 +190,7 @@ class Grasp:
         contact_area: pad contact area on each face [m²].
         transfer_yaw: rotation of the wrist from pick to place [rad], signed.
         margin: clearance from the neighbours that was verified [m].
+        score: how good the grasp is (larger is better; grasps come best first).
     """
 
     T_object_tcp: np.ndarray
@@ -206,14 +207,20 @@ class Grasp:
 
 @dataclass(frozen=True, kw_only=True)
 class GraspReport:
-    """What `plan_grasps` found: feasible grasps (best first) and why others were dropped."""
+    """The grasps found for one move and why the other candidates were dropped.
+
+    Attributes:
+        grasps: the feasible grasps (`Grasp`), best first; empty when there is none.
+        rejected: why candidates were dropped (a reason in words) → how many.
+        blockers: neighbour id → how many candidates it blocked (at the pick or the place).
+    """
 
     grasps: tuple[Grasp, ...]
     rejected: dict[str, int] = field(default_factory=dict)
     blockers: dict[str, int] = field(default_factory=dict)
-    """Neighbour id → how many candidates it blocked (at the pick or the place)."""
 
     def summary(self) -> str:
+        """One line: why candidates were dropped, the most frequent reason first."""
         if not self.rejected:
             return "no antiparallel vertical face pair on the mesh"
         parts = [f"{n} {why}" for why, n in sorted(self.rejected.items(), key=lambda kv: -kv[1])]
@@ -812,9 +819,14 @@ UP = np.array([0.0, 0.0, 1.0])  # the vertical sweep above a pick or a place [m]
 
 @dataclass(frozen=True, kw_only=True)
 class MoveVerdict:
-    """Whether the robot can make a move; if not, the neighbours in the way and why.
+    """Whether the robot can make a move; if not, why, and the neighbours in the way.
 
     Attributes:
+        ok: True when some grasp makes the move.
+        blockers: when not `ok`, the ids (str) of the neighbours in the way, most blocking
+            first; empty when no neighbour is to blame (e.g. no face pair fits the jaws).
+        reason: when not `ok`, why in words ("'b' is above the object at the pick", "no
+            top-down 2F-85 grasp clears the neighbours: …"); "" when `ok`.
         grasps: feasible grasps found (at most the `limit` asked for; not ranked).
     """
 

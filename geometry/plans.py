@@ -26,7 +26,13 @@ from geometry.tolerances import TOLERANCES
 @dataclass(frozen=True, kw_only=True)
 class Workspace:
     """Where objects may be: every vertex inside an x, y box and within `reach` of the robot's
-    base axis [m]."""
+    base axis [m].
+
+    Attributes:
+        x: (min, max) world x [m].
+        y: (min, max) world y [m].
+        reach: largest horizontal distance from the robot's base axis (the world z axis) [m].
+    """
 
     x: tuple[float, float]
     y: tuple[float, float]

@@ -9,8 +9,9 @@ These are the programs' names for `contracts.se3`, the one SE(3) implementation 
 checks, the simulator and the domains use too: each function here checks its arguments
 (raising `ToolboxError` naming the problem) and calls it. The maths is shared on purpose: a
 pose convention the programs and their judges disagreed on would fail every draft for a
-reason no feedback could name. What the judges must not share with the programs (geometry
-that decides a verdict) lives in `geometry/` and is documented there.
+reason no feedback could name. The geometry that decides the verdicts is shared too:
+`toolbox.stability` (collision, support, stability) and `toolbox.robot` (the hand) are the
+judges' own functions, re-exported.
 """
 
 from __future__ import annotations

@@ -23,8 +23,9 @@ __all__ = ["finger_footprints", "footprint", "polygon_gap", "spread_footprints"]
 def footprint(mesh, pose: object, *, z_range: tuple[float, float] | None = None) -> np.ndarray:
     """Convex footprint (N, 2) of a posed mesh seen from above [m], counter-clockwise.
 
-    `z_range` (world z [m]) keeps only vertices in that height band, e.g. the 16 mm knob of a
-    tangram piece: `footprint(mesh, pose, z_range=(0.016, 1.0))`.
+    `z_range` (world z [m]) keeps only vertices in that height band, e.g. the knob of a
+    tangram piece lying on the table (the piece is 15 mm thick, the knob stands on it):
+    `footprint(mesh, pose, z_range=(0.016, 1.0))`.
     """
     T = np.asarray(pose, dtype=float)
     if T.shape != (4, 4):

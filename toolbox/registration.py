@@ -172,7 +172,7 @@ def register_mesh_to_segment(
         depth: full depth image (H, W) [m], 0 where invalid (not only the segment: other
             objects' depth tells what may hide this one).
         mask: (H, W) bool, the object's pixels (>= 10 with valid depth).
-        camera: the DESIGN.md camera dict.
+        camera: the camera dict `{"width", "height", "K", "T_world_camera"}` of `depth`.
         init, voxel_size, max_distance, n_samples, seed: as in `register_mesh_to_points`.
 
     Returns:

@@ -1,7 +1,7 @@
 """Offscreen rendering of object records with the OpenCV camera, and render comparison.
 
 Design rule: one call renders exactly what the generated `render` function must return —
-`{"rgb", "depth", "mask"}` — from records, meshes and a DESIGN.md camera (pixel centres at
+`{"rgb", "depth", "mask"}` — from records, meshes and a camera dict (pixel centres at
 integer coordinates). Mask and depth come from one pass without anti-aliasing, so they agree
 pixel for pixel. The first call for an image size takes ~1 s (OpenGL context); later calls
 ~0.05–0.15 s at 1280×720.

@@ -96,7 +96,9 @@ class Hand:
             functions receive as `meshes`).
         symmetries: mesh key → object-frame symmetry transforms (n, 4, 4) (e.g.
             `toolbox.cube_symmetries()`); an object may then end at `target @ S` for any of
-            them, which gives the wrist more ways to place it. Default: none.
+            them, which gives the wrist more ways to place it. Default: none. The plan checks
+            and the executor pass each mesh's full symmetry group (every proper rotation the
+            domain section's mesh list counts): a Hand given fewer may refuse moves they accept.
 
     Results are cached on the poses involved: asking again about the same move is free.
     """
@@ -134,10 +136,12 @@ class Hand:
         *,
         place_records: Sequence[Mapping] | None = None,
     ) -> MoveVerdict:
-        """Whether the robot can carry `object_id` from its pose in `records` to
-        `target_pose`: `.ok`, else `.reason` ("which finger hits what") and `.blockers` (the
-        objects in the way, most blocking first). The other objects are `records` at the pick
-        and `place_records` (default: the same) at the place."""
+        """Whether the robot can carry `object_id` from its pose in `records` (the objects
+        before the step) to `target_pose`: a `MoveVerdict` (`.ok`, else `.reason` and
+        `.blockers`, the ids in the way). `place_records` are the other objects as they stand
+        at the place (the moved object's own record in them is ignored); the default,
+        `records`, is right for a plan step, which moves `object_id` alone, and is how the
+        checks judge each step. Pass others only to ask about a place among other poses."""
         me = next((r for r in records if str(r["id"]) == str(object_id)), None)
         if me is None:
             raise ToolboxError(f"no record with id {object_id!r}")
@@ -183,7 +187,8 @@ class Hand:
         limit: int | None = None,
     ) -> GraspReport:
         """Every feasible grasp for the move (best first; `limit` stops early), with counts
-        of why the others were refused."""
+        of why the others were refused: a `GraspReport`. The grasps alone: the neighbours are
+        `records` at both ends, and what lies above the object is not tested."""
         me = next((r for r in records if str(r["id"]) == str(object_id)), None)
         if me is None:
             raise ToolboxError(f"no record with id {object_id!r}")

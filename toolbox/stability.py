@@ -18,9 +18,10 @@ penetration and for the face-to-face contacts of resting parts. The table is the
 Default tolerances (the checks and the scoring judge with them): interpenetration up to `TOUCHING`
 counts as touching; a gap up to `RESTING_GAP` counts as resting on; a centre of mass (with its
 load) may lie `COM_MARGIN` outside its support; a contact normal with |z| from `VERTICAL` is a
-support. Perceived states (`perceive`'s output, which `relate` and `plan` receive) are accepted
-with more slack: objects up to `PERCEIVED_OVERLAP` into one another and up to `PERCEIVED_GAP` above
-what holds them up; read overlaps and contacts in them with that slack.
+support. Perceived states (`perceive`'s output, which `relate` and `plan` receive online; their
+checks give them exact scenes) are accepted with more slack: objects up to `PERCEIVED_OVERLAP` into
+one another and up to `PERCEIVED_GAP` above what holds them up; read overlaps and contacts in them
+with that slack, and hold what a plan makes to the defaults.
 """
 
 from __future__ import annotations

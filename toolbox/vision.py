@@ -1,11 +1,11 @@
 """Camera geometry and point clouds: projection, back-projection, planes.
 
-Design rule: every function takes the DESIGN.md camera dict `{"width", "height", "K" (3, 3),
-"T_world_camera" (4, 4)}` in the OpenCV convention (x right, y down, z forward) and works in
-the world frame unless told otherwise. Pixel coordinates are `(u, v)` = (column, row) with the
-centre of pixel `depth[v, u]` at integer `(u, v)`. Depth is metric along the optical axis [m],
-0 where invalid. A plane is `(a, b, c, d)` with unit normal `(a, b, c)`: points p on it satisfy
-`a·x + b·y + c·z + d = 0`, and the signed distance is positive on the normal's side.
+Design rule: every function takes the representation's camera dict `{"width", "height",
+"K" (3, 3), "T_world_camera" (4, 4)}` in the OpenCV convention (x right, y down, z forward) and
+works in the world frame unless told otherwise. Pixel coordinates are `(u, v)` = (column, row)
+with the centre of pixel `depth[v, u]` at integer `(u, v)`. Depth is metric along the optical
+axis [m], 0 where invalid. A plane is `(a, b, c, d)` with unit normal `(a, b, c)`: points p on it
+satisfy `a·x + b·y + c·z + d = 0`, and the signed distance is positive on the normal's side.
 """
 
 from __future__ import annotations

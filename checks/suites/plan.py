@@ -71,9 +71,11 @@ RULES: tuple[Rule, ...] = (
     ),
     Rule(
         check="property.plan_length_bounded",
-        text="A plan has at most {checks.suites.plan:STEPS_PER_OBJECT} steps per object (or "
+        text="A plan has at most {checks.suites.plan:STEPS_PER_OBJECT} steps per object, or "
         "{checks.suites.plan:STEPS_PER_REFERENCE_STEP} per step of the domain's reference "
-        "construction order, when that allows more).",
+        "construction order when that allows more: the order the generator found for the "
+        "instance, one object at a time, each put at its goal once what carries it there is in "
+        "place, a blocking object moved aside when none can be.",
     ),
     Rule(
         check="property.identity_plan_empty",
