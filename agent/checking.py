@@ -26,7 +26,14 @@ class SuiteChecker:
         return self._executor
 
     def check(
-        self, domain: str, function: str, source: str, *, deps: dict[str, str], out_dir: Path
+        self,
+        domain: str,
+        function: str,
+        source: str,
+        *,
+        deps: dict[str, str],
+        out_dir: Path,
+        cases_seed: int | None = None,
     ) -> dict:
         from checks import run_checks
 
@@ -38,6 +45,7 @@ class SuiteChecker:
             thorough=self.thorough,
             executor=self._get_executor(),
             out_dir=out_dir,
+            cases_seed=cases_seed,
         )
 
     def close(self) -> None:

@@ -31,6 +31,7 @@ from agent.extract import (
 from agent.journal import Journal
 from agent.prompt import DomainContext, Feedback, build_request
 from agent.report import report_image
+from checks.inputs import case_seed, fresh_seed
 from checks.report import sanitise_text
 from contracts.functions import CODE_DEPS, authoring_order
 
@@ -39,7 +40,14 @@ class Checker(Protocol):
     """Runs a draft's full check suite; returns a check report (check_report.schema.json)."""
 
     def check(
-        self, domain: str, function: str, source: str, *, deps: dict[str, str], out_dir: Path
+        self,
+        domain: str,
+        function: str,
+        source: str,
+        *,
+        deps: dict[str, str],
+        out_dir: Path,
+        cases_seed: int,
     ) -> dict: ...
 
     def markdown(self, report: dict) -> str: ...
@@ -86,8 +94,10 @@ class AuthoringRun:
         progress: Progress = _stderr_progress,
         max_tokens: int = DEFAULT_MAX_TOKENS,
         max_tokens_cap: int = MAX_TOKENS_CAP,
+        cases_seed: int | None = None,
     ) -> None:
         self.ctx = ctx
+        self.cases_seed = cases_seed
         self.client = client
         self.checker = checker
         self.journal = journal
@@ -102,10 +112,19 @@ class AuthoringRun:
         """Author every function not yet frozen in this run; return the frozen sources."""
         state = self.journal.state()
         frozen = dict(state.frozen)
+        self.cases_seed = self._run_cases_seed()
         if not self.journal.events():
             self.journal.event(
-                "started", config={"domain": self.ctx.domain, "max_attempts": self.max_attempts}
+                "started",
+                config={
+                    "domain": self.ctx.domain,
+                    "max_attempts": self.max_attempts,
+                    "cases_seed": self.cases_seed,
+                },
             )
+        record = getattr(self.client, "record_cases_seed", None)
+        if record is not None:
+            record(self.cases_seed)
         for function in authoring_order():
             if function in frozen:
                 self.progress(f"[{function}] frozen earlier in this run")
@@ -113,6 +132,19 @@ class AuthoringRun:
             frozen[function] = self._author(function, frozen)
         self.journal.event("finished")
         return frozen
+
+    def _run_cases_seed(self) -> int:
+        """The run's check-case seed: the journal's (a resumed run), else the one given (a
+        replayed transcript's), else a fresh one. Each attempt draws its cases from
+        `checks.inputs.case_seed(run seed, function, attempt)`."""
+        for e in self.journal.events():
+            if e["event"] == "started":
+                seed = (e.get("config") or {}).get("cases_seed")
+                if isinstance(seed, int):
+                    return seed
+        if self.cases_seed is not None:
+            return int(self.cases_seed)
+        return fresh_seed()
 
     def _say(self, function: str, attempt: int, what: str) -> None:
         st = self.journal.state()
@@ -194,6 +226,7 @@ class AuthoringRun:
                         source,
                         deps=deps,
                         out_dir=self.journal.images_dir(function, attempt),
+                        cases_seed=case_seed(self.cases_seed, function, attempt),
                     )
                     markdown = self.checker.markdown(report)
                     if truncated and not report["passed"]:

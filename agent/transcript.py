@@ -1,11 +1,14 @@
 """The transcript folder: who wrote it, and one readable, diffable file per response.
 
 ```
-<dir>/meta.json                    {"format", "domain", "written_by", "responses": [...]}
+<dir>/meta.json                    {"format", "domain", "written_by", "cases_seed", "responses": [...]}
 <dir>/01-render-attempt1.md        the response text exactly as the model (or a person) wrote it
 ```
 Each `responses` entry names its file, function, attempt, the request hash it answered (null
 when it was never asked, e.g. a hand-written file not yet bound to prompts) and usage.
+`cases_seed` is the run's seed of the check cases (`checks.inputs.case_seed` draws each
+attempt's from it): a replay draws the cases the recorded run was checked on, so its feedback,
+and with it every later request, is the recorded one.
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ class Transcript:
     written_by: Author
     entries: list[Entry] = field(default_factory=list)
     texts: dict[str, str] = field(default_factory=dict)  # file name → response text
+    cases_seed: int | None = None  # the run's check-case seed (None: not recorded)
 
     @classmethod
     def load(cls, directory: Path) -> Transcript:
@@ -80,7 +84,12 @@ class Transcript:
             if not p.is_file():
                 raise TranscriptError(f"{meta_path}: response file {e.file} is missing")
             texts[e.file] = p.read_text()
-        return cls(domain=meta["domain"], written_by=author, entries=entries, texts=texts)
+        seed = meta.get("cases_seed")
+        if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool) or seed < 0):
+            raise TranscriptError(f"{meta_path}: cases_seed must be an integer ≥ 0, got {seed!r}")
+        return cls(
+            domain=meta["domain"], written_by=author, entries=entries, texts=texts, cases_seed=seed
+        )
 
     def save(self, directory: Path) -> None:
         directory.mkdir(parents=True, exist_ok=True)
@@ -90,6 +99,7 @@ class Transcript:
             "format": FORMAT,
             "domain": self.domain,
             "written_by": self.written_by.to_dict(),
+            **({} if self.cases_seed is None else {"cases_seed": self.cases_seed}),
             "responses": [e.to_dict() for e in self.entries],
         }
         atomic_write(directory / "meta.json", json.dumps(meta, indent=2) + "\n")

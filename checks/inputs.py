@@ -1,15 +1,23 @@
-"""The cases a suite checks a draft on, built on the host from the domain and the simulator.
+"""The cases a suite checks a draft on, drawn on the host from the task's whole space.
 
-Design rule: inputs come from the domain's seeded instance generator, never only from the
-reference instance, and every case keeps its ground truth beside the arguments the draft will
-get: the true records of an observation, the simulator's image of a scene, the reference
-relations of a state. Only the arguments ever reach the draft. Everything is seeded and
-cached, so the same draft gets the same cases.
+Design rule: every case is *drawn* from a case seed (`build_cases(..., seed=S)`), fresh for
+each check run — each attempt of an authoring run gets its own (`case_seed`), recorded in the
+journal and the transcript so that a replay draws the same cases — so no draft can be tuned
+to a fixed case list, and nothing one attempt's feedback shows about its cases is of use on
+the next. Cases come from what the task text allows, not from the benchmark catalogue:
+instances of the domain's generator at fresh seeds, goals composed from the task's parts
+(`Domain.compose`), the task text's hiding case (`Domain.hidden_scene`), and — for `perceive` —
+cameras drawn from the domain's camera envelope (`Domain.camera_envelope`) as well as its named
+views, seen with the trials' realism and *calibrated* camera at full resolution, exactly as the
+runtime calls `perceive`. Every case keeps its ground truth beside the arguments the draft
+will get (the true records of an observation, the simulator's image of a scene, the reference
+relations of a state); only the arguments ever reach the draft.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from collections.abc import Mapping
 from functools import lru_cache
 from typing import Any
@@ -21,17 +29,43 @@ from checks.budget import Budget
 from contracts.errors import UsageError
 from contracts.functions import FUNCTIONS
 from domains import Domain
+from domains.cameras import scaled
 
-HALF_RES = 2  # image checks render at 1/2 of the domain cameras' resolution
-# `perceive` is checked on observations as the trials make them (`sim.realism`'s default level:
-# sensor noise, exposure, white balance, light, the stereo depth model), but seen through the
-# true camera: the calibration error is an offset of the whole scene that no program can see,
-# which the trials measure and the checks do not hold against a draft
-CHECK_REALISM = "default, true camera"
+HALF_RES = 2  # image checks render at 1/2 of the observation's resolution …
+IMAGE_FOCAL_MIN = 440.0  # [px] … or at full resolution where half would give a focal length
+# under this (about the named views' at half resolution): IoU on objects a few pixels wide
+# would judge the pixel grid, not the pose
+# `perceive` is checked on observations exactly as the trials make them: `sim.realism`'s
+# default level (sensor noise, exposure, white balance, light, the stereo depth model) and
+# the calibrated camera (the true camera with the trials' calibration error)
+CHECK_REALISM = "default"
 PROPERTY_RES = 4  # render's property checks at 1/4
+SEED_SPACE = 2**31  # drawn generator and composer seeds are in [FRESH_FROM, SEED_SPACE)
+FRESH_FROM = 10**6  # above every benchmark split's seeds
+NAMED_VIEW_SHARE = 0.25  # of perceive's observations use a named view, the rest the envelope
+COMPOSED_SHARE = 1 / 3  # of perceive's and relate's scenes are composed, where a composer is
 
 
-@lru_cache(maxsize=256)
+def case_seed(run_seed: int, function: str, attempt: int) -> int:
+    """The case seed of one attempt of an authoring run (a fresh draw per attempt)."""
+    h = hashlib.sha256(f"{run_seed}:{function}:{attempt}".encode()).digest()
+    return int.from_bytes(h[:8], "big") >> 1
+
+
+def fresh_seed() -> int:
+    """A case seed nobody chose (`rivet check` without `--seed`, a new authoring run)."""
+    import secrets
+
+    return secrets.randbits(62)
+
+
+def _rng(seed: int, *key: str) -> np.random.Generator:
+    return np.random.default_rng(
+        [seed, *(int.from_bytes(hashlib.sha256(k.encode()).digest()[:4], "big") for k in key)]
+    )
+
+
+@lru_cache(maxsize=512)
 def _instance(domain_name: str, seed: int) -> domains.Instance | None:
     try:
         return domains.load(domain_name).generate(seed)
@@ -39,18 +73,16 @@ def _instance(domain_name: str, seed: int) -> domains.Instance | None:
         return None
 
 
-def instances(domain: Domain, seeds: tuple[int, ...]) -> list[domains.Instance]:
-    """Generated instances for `seeds` (a seed the generator cannot serve is replaced by the
-    next unused one, deterministically)."""
-    out, used, extra = [], set(seeds), max(seeds, default=0) + 1000
-    for s in seeds:
-        inst = _instance(domain.name, s)
-        while inst is None:
-            while extra in used:
-                extra += 1
-            used.add(extra)
-            inst = _instance(domain.name, extra)
-        out.append(inst)
+def instances(domain: Domain, rng: np.random.Generator, n: int) -> list[domains.Instance]:
+    """`n` instances of the domain's generator at seeds drawn from `rng` (a seed the
+    generator cannot serve is replaced by another draw)."""
+    out: list[domains.Instance] = []
+    for _ in range(50 * max(n, 1)):
+        if len(out) >= n:
+            break
+        inst = _instance(domain.name, int(rng.integers(FRESH_FROM, SEED_SPACE)))
+        if inst is not None:
+            out.append(inst)
     return out
 
 
@@ -59,19 +91,33 @@ def _composed(domain_name: str, seed: int) -> domains.Instance | None:
     return domains.load(domain_name).composed_instance(seed)
 
 
-def composed(domain: Domain, seeds: tuple[int, ...], n: int) -> list[domains.Instance]:
-    """The first `n` composed instances of `seeds` that have an order the robot can execute
-    (none when the domain has no composer)."""
+def composed(domain: Domain, rng: np.random.Generator, n: int) -> list[domains.Instance]:
+    """`n` composed instances (goals built from the task's parts, `Domain.composed_instance`)
+    with an order the robot can execute, at seeds drawn from `rng` (none when the domain has
+    no composer)."""
     out: list[domains.Instance] = []
     if domain.composed_goals is None:
         return out
-    for s in seeds:
+    for _ in range(20 * max(n, 1)):
         if len(out) >= n:
             break
-        inst = _composed(domain.name, s)
+        inst = _composed(domain.name, int(rng.integers(FRESH_FROM, SEED_SPACE)))
         if inst is not None:
             out.append(inst)
     return out
+
+
+def composed_scene(domain: Domain, rng: np.random.Generator) -> tuple[str, list[dict]] | None:
+    """(side, records) of one side of a composed draw (`Domain.compose`; no order needed);
+    None when the domain has no composer or no draw gives a scene."""
+    if domain.composed_goals is None:
+        return None
+    for _ in range(20):
+        drawn = domain.compose(int(rng.integers(FRESH_FROM, SEED_SPACE)))
+        if drawn is not None:
+            side = "start" if rng.random() < 0.5 else "goal"
+            return side, [dict(r) for r in drawn[0 if side == "start" else 1]]
+    return None
 
 
 def records(scene: Mapping) -> list[dict]:
@@ -88,42 +134,49 @@ def camera(domain: Domain, name: str, scale: int = 1) -> dict:
     return small.to_camera()
 
 
-@lru_cache(maxsize=64)
-def _observation(domain_name: str, seed: int, side: str, cam: str, scale: int) -> dict[str, Any]:
-    """The simulator's clean view (rgb, depth, mask) of an instance's scene."""
+def _observation(domain: Domain, recs: list[dict], cam: dict) -> dict[str, Any]:
+    """The simulator's clean view (rgb, depth, mask) of a scene from camera `cam`."""
     from sim.observation import observe
 
-    domain = domains.load(domain_name)
-    inst = _instance(domain_name, seed)
-    assert inst is not None
-    scene = inst.start if side == "start" else inst.goal
-    return observe(domain, scene, camera(domain, cam, scale), noise=None, mask=True)
+    return observe(domain, domain.scene(recs), cam, noise=None, mask=True)
+
+
+def _realistic(
+    domain: Domain, recs: list[dict], cam: dict, seed: int
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(what `perceive` gets of a scene seen by the true camera `cam` — `CHECK_REALISM`: the
+    trials' default realism, the calibrated camera — with the true camera's mask, the clean
+    render's rgb and depth) from one render."""
+    from sim.observation import observe_with_truth
+
+    obs, truth = observe_with_truth(
+        domain, domain.scene(recs), cam, seed=seed, realism=CHECK_REALISM, mask=True, clean=True
+    )
+    return obs, {"rgb": truth["clean_rgb"], "depth": truth["clean_depth"], "mask": obs["mask"]}
+
+
+def _subsample(view: Mapping[str, Any], scale: int) -> dict[str, Any]:
+    """Every `scale`-th pixel of a view: the view of the camera at 1/`scale` resolution (the
+    same view and field of view, `domains.cameras.scaled`), to a fraction of a pixel."""
+    return {k: np.ascontiguousarray(view[k][::scale, ::scale]) for k in ("rgb", "depth", "mask")}
+
+
+def _corners(domain: Domain, recs: list[dict]) -> np.ndarray:
+    """The corners of every object's bounding box in the world (N·8, 3): what a camera must
+    show for the scene to be in its frame."""
+    meshes = domain.meshes()
+    pts = []
+    for r in recs:
+        lo, hi = meshes[r["mesh"]].bounds
+        box = np.array(
+            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        )
+        pose = np.asarray(r["pose"], float)
+        pts.append(box @ pose[:3, :3].T + pose[:3, 3])
+    return np.concatenate(pts) if pts else np.zeros((0, 3))
 
 
 @lru_cache(maxsize=64)
-def _realistic(domain_name: str, seed: int, side: str, cam: str) -> dict[str, Any]:
-    """The observation `perceive` is checked on (`CHECK_REALISM`), seeded by the instance."""
-    from sim.observation import observe
-
-    domain = domains.load(domain_name)
-    inst = _instance(domain_name, seed)
-    assert inst is not None
-    scene = inst.start if side == "start" else inst.goal
-    return observe(
-        domain, scene, camera(domain, cam, 1), seed=seed * 2 + (side == "goal"), realism=_level()
-    )
-
-
-def _level():
-    """`CHECK_REALISM`: the default realism level seen through the true camera."""
-    from sim.realism import DEFAULT
-
-    return dataclasses.replace(
-        DEFAULT, name=CHECK_REALISM, calib_translation=0.0, calib_rotation=0.0
-    )
-
-
-@lru_cache(maxsize=16)
 def _hidden(domain_name: str, seed: int) -> tuple[list[dict], str] | None:
     """(records, id) of `Domain.hidden_scene(seed)` when the scene is valid and its object
     shows no pixel to the front camera at full resolution; None otherwise."""
@@ -136,7 +189,7 @@ def _hidden(domain_name: str, seed: int) -> tuple[list[dict], str] | None:
         return None
     recs, behind = records(domain.scene(drawn[0])), drawn[1]
     k = [r["id"] for r in recs].index(behind)
-    small = render_scene(recs, domain.meshes(), camera(domain, "front", HALF_RES))["mask"]
+    small = render_scene(recs, domain.meshes(), camera(domain, "front", PROPERTY_RES))["mask"]
     if (small == k).any():  # a cheap first look
         return None
     if (render_scene(recs, domain.meshes(), camera(domain, "front", 1))["mask"] == k).any():
@@ -146,88 +199,174 @@ def _hidden(domain_name: str, seed: int) -> tuple[list[dict], str] | None:
     return recs, behind
 
 
-def hidden_views(domain: Domain, seeds: tuple[int, ...], n: int) -> list[tuple[int, list, str]]:
-    """(seed, records, hidden id) of the first `n` of `seeds` whose `Domain.hidden_scene` hides
-    its object entirely from the front camera."""
+def hidden_views(domain: Domain, rng: np.random.Generator, n: int) -> list[tuple[int, list, str]]:
+    """(seed, records, hidden id) of `n` draws of `Domain.hidden_scene` (seeds from `rng`)
+    that hide their object entirely from the front camera."""
     out: list[tuple[int, list, str]] = []
-    for s in seeds:
+    if n <= 0:
+        return out
+    for _ in range(40 * n):
         if len(out) >= n:
             break
+        s = int(rng.integers(FRESH_FROM, SEED_SPACE))
         got = _hidden(domain.name, s)
         if got is not None:
             out.append((s, *got))
     return out
 
 
-@lru_cache(maxsize=16)
-def _hidden_observation(domain_name: str, seed: int) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(clean view with mask, observation as `_realistic` makes them) of a hidden scene."""
-    from sim.observation import observe
+def observation_case(
+    domain: Domain,
+    name: str,
+    recs: list[dict],
+    true_camera: dict,
+    camera_name: str,
+    seed: int,
+    unscored: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """One `perceive` case: the observation (and its calibrated camera) the draft gets, the
+    truth, and the simulator's clean view at `image_scale` for the image check (host only)."""
+    full, clean = _realistic(domain, recs, true_camera, seed)
+    scale = image_scale(true_camera)
+    case: dict[str, Any] = {
+        "name": name,
+        "observation": {"rgb": full["rgb"], "depth": full["depth"], "camera": full["camera"]},
+        "camera": full["camera"],
+        "camera_name": camera_name,
+        # the perceived records are in the calibrated camera's world: redrawn from it, they
+        # land where the image shows the objects
+        "render_camera": scaled(full["camera"], scale),
+        "truth": recs,
+        "reference_camera": scaled(true_camera, scale),
+        "reference": {**_subsample(clean, scale), "full": full},
+    }
+    if unscored:
+        # shown nowhere and holding nothing up: it must be reported, but where it stands the
+        # image cannot say
+        case["unscored"] = list(unscored)
+    return case
 
-    domain = domains.load(domain_name)
-    got = _hidden(domain_name, seed)
-    assert got is not None
-    scene = domain.scene(got[0])
-    cam = camera(domain, "front", 1)
-    clean = observe(domain, scene, cam, noise=None, mask=True)
-    return clean, observe(domain, scene, cam, seed=seed, realism=_level())
+
+def image_scale(camera: Mapping) -> int:
+    """The image check's resolution for a camera: 1/`HALF_RES`, or full resolution where that
+    would leave a focal length under `IMAGE_FOCAL_MIN`."""
+    return HALF_RES if float(np.asarray(camera["K"])[1, 1]) / HALF_RES >= IMAGE_FOCAL_MIN else 1
 
 
-def _subsample(view: Mapping[str, Any], scale: int) -> dict[str, Any]:
-    """Every `scale`-th pixel of a view: the view of the camera at 1/`scale` resolution, to a
-    fraction of a pixel."""
-    return {k: np.ascontiguousarray(view[k][::scale, ::scale]) for k in ("rgb", "depth", "mask")}
+def perceive_cases(domain: Domain, budget: Budget, seed: int) -> list[dict[str, Any]]:
+    """`budget.observations` observations drawn from the task's space (see the module
+    docstring), `budget.hidden` of them the task text's hiding case where the domain has one."""
+    rng = _rng(seed, "perceive")
+    out = []
+    for _seed_h, recs, behind in hidden_views(domain, rng, budget.hidden):
+        out.append(
+            observation_case(
+                domain,
+                f"obs{len(out) + 1:02d}/hidden/front",
+                recs,
+                domain.camera("front"),
+                "front",
+                int(rng.integers(SEED_SPACE)),
+                unscored=(behind,),
+            )
+        )
+    pool = iter(instances(domain, rng, budget.observations))
+    envelope = domain.camera_envelope
+    while len(out) < budget.observations:
+        drawn = composed_scene(domain, rng) if rng.random() < COMPOSED_SHARE else None
+        if drawn is not None:
+            kind, (side, recs) = "composed", drawn
+        else:
+            inst = next(pool, None)
+            if inst is None:
+                break
+            side = "start" if rng.random() < 0.5 else "goal"
+            kind, recs = "generated", records(inst.start if side == "start" else inst.goal)
+        if rng.random() < NAMED_VIEW_SHARE:
+            cam_name = str(rng.choice(list(domain.cameras)))
+            true_camera = domain.camera(cam_name)
+        else:
+            cam_name = "drawn"
+            try:
+                true_camera = envelope.draw(rng, shows_points=_corners(domain, recs))
+            except ValueError:
+                continue
+        size = f"{true_camera['width']}x{true_camera['height']}"
+        out.append(
+            observation_case(
+                domain,
+                f"obs{len(out) + 1:02d}/{kind}-{side}/{cam_name}-{size}",
+                recs,
+                true_camera,
+                cam_name,
+                int(rng.integers(SEED_SPACE)),
+            )
+        )
+    return out
 
 
-def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]:
-    """The cases of `function`'s suite.
+def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dict[str, Any]:
+    """The cases of `function`'s suite, drawn from case seed `seed`.
 
     - render: ``scenes``: {name, records, camera, image (compared with the simulator),
       reference (the simulator's rgb/depth/mask, for image cases)};
-    - perceive: ``observations``: {name, observation (rgb, noisy depth, camera), camera,
-      render_camera, truth (true records), reference (the simulator's clean view at the
-      render camera's resolution and the full-size observation)};
+    - perceive: ``observations``: {name, observation (rgb, noisy depth, calibrated camera),
+      camera, render_camera, truth (true records), reference (the simulator's clean view at
+      `HALF_RES` and the full-size observation)};
     - relate: ``scenes``: {name, records, reference (relations)};
     - plan: ``instances``: {name, start, goal, start_relations, goal_relations, order_len}
       (the generator's, then the domain's composed ones), ``infeasible``: goals no plan
       reaches, with why.
     """
-    pool = instances(domain, budget.instance_seeds)
-    cases: dict[str, Any] = {}
+    if function not in FUNCTIONS:
+        raise UsageError(f"unknown function '{function}'; known: {', '.join(FUNCTIONS)}")
+    rng = _rng(seed, function)
+    cases: dict[str, Any] = {"seed": seed}
+    if function == "perceive":
+        cases["observations"] = perceive_cases(domain, budget, seed)
+        return cases
+    pool = instances(domain, rng, budget.instances)
+    sides = ("start", "goal")
 
-    def scene_of(i: int, side: str) -> list[dict]:
-        return records(pool[i].start if side == "start" else pool[i].goal)
+    def named(k: int, inst: domains.Instance) -> str:
+        kind = "composed" if inst.name.startswith("composed/") else "generated"
+        return f"case{k + 1:02d}/{kind}"
 
     if function == "relate":
+        scenes = [(named(k, inst), inst) for k, inst in enumerate(pool)]
+        scenes += [
+            (named(len(pool) + k, inst), inst)
+            for k, inst in enumerate(composed(domain, rng, budget.composed))
+        ]
         cases["scenes"] = [
             {
-                "name": f"{inst.name}/{side}",
-                "records": scene_of(i, side),
-                "reference": domain.reference_relations(scene_of(i, side)),
+                "name": f"{name}/{side}",
+                "records": (recs := records(getattr(inst, side))),
+                "reference": domain.reference_relations(recs),
             }
-            for i, inst in enumerate(pool)
-            for side in ("start", "goal")
+            for name, inst in scenes
+            for side in sides
         ]
     elif function == "plan":
-        pool = [*pool, *composed(domain, budget.composed_seeds, budget.composed)]
+        pool = [*pool, *composed(domain, rng, budget.composed)]
         cases["instances"] = [
             {
-                "name": inst.name,
-                "start": scene_of(i, "start"),
-                "goal": scene_of(i, "goal"),
-                "start_relations": domain.reference_relations(scene_of(i, "start")),
-                "goal_relations": domain.reference_relations(scene_of(i, "goal")),
+                "name": named(k, inst),
+                "start": records(inst.start),
+                "goal": records(inst.goal),
+                "start_relations": domain.reference_relations(records(inst.start)),
+                "goal_relations": domain.reference_relations(records(inst.goal)),
                 "order_len": len(inst.order),
             }
-            for i, inst in enumerate(pool)
+            for k, inst in enumerate(pool)
         ]
-        cases["infeasible"] = infeasible_cases(domain, pool[0])
+        cases["infeasible"] = infeasible_cases(domain, pool, rng, budget.infeasible)
     elif function == "render":
         scenes = []
         for k, (i, side, cam) in enumerate(budget.render_cases):
-            i = i % len(pool)
-            recs = scene_of(i, side)
-            name = f"{pool[i].name}/{side}/{cam}"
+            inst = pool[i % len(pool)]
+            recs = records(getattr(inst, side))
+            name = f"{named(i % len(pool), inst)}/{side}/{cam}"
             scenes.append(
                 {
                     "name": name,
@@ -235,7 +374,7 @@ def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]
                     "camera": camera(domain, cam, HALF_RES),
                     "camera_name": cam,
                     "image": True,
-                    "reference": _observation(domain.name, pool[i].seed, side, cam, HALF_RES),
+                    "reference": _observation(domain, recs, camera(domain, cam, HALF_RES)),
                 }
             )
             if k == 0:  # a small view for the cheap properties
@@ -249,73 +388,16 @@ def build_cases(domain: Domain, function: str, budget: Budget) -> dict[str, Any]
                     },
                 )
         cases["scenes"] = scenes
-    elif function == "perceive":
-        obs = []
-        chosen = [(i % len(pool), side, cam) for i, side, cam in budget.observations]
-        search = instances(domain, budget.hard_seeds)
-        for i, side, cam in _hardest(domain.name, budget.hard_seeds, budget.hard_observations):
-            if (search[i].seed, side, cam) not in {(pool[j].seed, s_, c) for j, s_, c in chosen}:
-                pool = [*pool, search[i]]
-                chosen.append((len(pool) - 1, side, cam))
-        for i, side, cam in chosen:
-            i = i % len(pool)
-            recs = scene_of(i, side)
-            clean = _observation(domain.name, pool[i].seed, side, cam, 1)
-            full = _realistic(domain.name, pool[i].seed or 0, side, cam)
-            obs.append(
-                {
-                    "name": f"{pool[i].name}/{side}/{cam}",
-                    "observation": {
-                        "rgb": full["rgb"],
-                        "depth": full["depth"],
-                        "camera": full["camera"],
-                    },
-                    "camera": full["camera"],
-                    "camera_name": cam,
-                    "render_camera": camera(domain, cam, HALF_RES),
-                    "truth": recs,
-                    "reference": {**_subsample(clean, HALF_RES), "full": full},
-                }
-            )
-        for seed, recs, behind in hidden_views(domain, budget.hidden_seeds, budget.hidden):
-            clean, full = _hidden_observation(domain.name, seed)
-            obs.append(
-                {
-                    "name": f"hidden/seed{seed}/front",
-                    "observation": {
-                        "rgb": full["rgb"],
-                        "depth": full["depth"],
-                        "camera": full["camera"],
-                    },
-                    "camera": full["camera"],
-                    "camera_name": "front",
-                    "render_camera": camera(domain, "front", HALF_RES),
-                    "truth": recs,
-                    # shown nowhere and holding nothing up: it must be reported, but where it
-                    # stands the image cannot say
-                    "unscored": [behind],
-                    "reference": {**_subsample(clean, HALF_RES), "full": full},
-                }
-            )
-        cases["observations"] = obs
-    else:
-        raise UsageError(f"unknown function '{function}'; known: {', '.join(FUNCTIONS)}")
     return cases
-
-
-@lru_cache(maxsize=16)
-def _hardest(domain_name: str, seeds: tuple[int, ...], n: int) -> list[tuple[int, str, str]]:
-    domain = domains.load(domain_name)
-    return hardest_views(domain, instances(domain, seeds), n, exclude=[])
 
 
 def hardest_views(
     domain: Domain, pool: list, n: int, *, exclude: list[tuple[int, str, str]]
 ) -> list[tuple[int, str, str]]:
     """The `n` (instance, side, camera) views whose least visible object shows the fewest
-    pixels: the views perception finds hardest, so that the checks see occlusion whenever the
-    generator produces it. A view hiding an object entirely counts only when the object can be
-    inferred — it holds up another object — since nothing could find it otherwise."""
+    pixels: the views perception finds hardest. A view hiding an object entirely counts only
+    when the object can be inferred — it holds up another object — since nothing could find
+    it otherwise."""
     if n <= 0:
         return []
     from toolbox import render_scene
@@ -340,29 +422,106 @@ def hardest_views(
     return [(i, side, cam) for _, i, side, cam in scored[:n]]
 
 
-def infeasible_cases(domain: Domain, inst: domains.Instance) -> list[dict[str, Any]]:
-    """Goals no plan can reach, made from an instance: a floating object, two objects in one
-    place."""
-    start = records(inst.start)
-    goal = records(inst.goal)
-    floating = [dict(r, pose=r["pose"].copy()) for r in goal]
-    low = min(range(len(floating)), key=lambda k: floating[k]["pose"][2, 3])
-    floating[low]["pose"][2, 3] += 0.10
-    overlap = [dict(r, pose=r["pose"].copy()) for r in goal]
-    overlap[1]["pose"] = overlap[0]["pose"].copy()
-    out = []
-    for name, g, why in (
-        ("floating", floating, f"'{floating[low]['id']}' floats 100 mm above its support"),
-        ("overlap", overlap, f"'{overlap[1]['id']}' and '{overlap[0]['id']}' share one place"),
-    ):
+INFEASIBLE_KINDS = ("floating", "overlap", "unsupported", "outside")
+
+
+def infeasible_cases(
+    domain: Domain, pool: list[domains.Instance], rng: np.random.Generator, n: int
+) -> list[dict[str, Any]]:
+    """`n` goals no plan can reach, drawn from the instances' goals: an object floating at a
+    random height, an object sunk into a random partner by a random depth, a stack whose
+    support is moved away, an object moved out of the reachable workspace — each kind in turn,
+    each kept only when the geometry confirms it (`infeasible_goal`)."""
+    out: list[dict[str, Any]] = []
+    for _k in range(50 * max(n, 1)):
+        if len(out) >= n:
+            break
+        inst = pool[int(rng.integers(len(pool)))]
+        kind = INFEASIBLE_KINDS[len(out) % len(INFEASIBLE_KINDS)]
+        got = infeasible_goal(domain, records(inst.goal), kind, rng)
+        if got is None:
+            continue
+        goal, why = got
+        start = records(inst.start)
         out.append(
             {
-                "name": f"{inst.name}/{name}",
+                "name": f"infeasible{len(out) + 1:02d}/{kind}",
                 "start": start,
-                "goal": g,
+                "goal": goal,
                 "start_relations": domain.reference_relations(start),
-                "goal_relations": domain.reference_relations(g),
+                "goal_relations": domain.reference_relations(goal),
                 "why": why,
             }
         )
     return out
+
+
+def infeasible_goal(
+    domain: Domain, goal: list[dict], kind: str, rng: np.random.Generator
+) -> tuple[list[dict], str] | None:
+    """`goal` made unreachable the `kind` way (`INFEASIBLE_KINDS`) with drawn amounts, and why;
+    None when this draw does not make it so (e.g. no stack to undermine)."""
+    from domains.generation import geometric_problems
+    from geometry import PLACEMENT
+
+    g = [dict(r, pose=np.array(r["pose"], float)) for r in goal]
+    ids = [r["id"] for r in g]
+    graph = domain.reference_relations(g)
+    on = [(e["source"], e["target"]) for e in graph["edges"] if e["type"] == "on"]
+    if kind == "floating":
+        k = int(rng.integers(len(g)))
+        lift = float(rng.uniform(0.02, 0.12))
+        g[k]["pose"][2, 3] += lift
+        why = f"'{ids[k]}' floats {lift * 1000:.0f} mm above where it would rest"
+        if geometric_problems(domain, domain.scene(g)):
+            return None  # lifted into something else or out of reach: another kind's case
+        return g, why
+    if kind == "overlap":
+        if len(g) < 2:
+            return None
+        a, b = (int(x) for x in rng.choice(len(g), 2, replace=False))
+        frac = float(rng.uniform(0.0, 0.6))
+        ang = float(rng.uniform(0, 2 * np.pi))
+        size = float(np.min(domain.meshes()[g[b]["mesh"]].extents[:2]))
+        g[a]["pose"] = g[b]["pose"].copy()
+        g[a]["pose"][:2, 3] += frac * size * np.array([np.cos(ang), np.sin(ang)])
+        problems = [
+            p for p in geometric_problems(domain, domain.scene(g)) if "penetrates" in p.problem
+        ]
+        if not problems:
+            return None
+        return g, f"'{ids[a]}' and '{ids[b]}' overlap"
+    if kind == "unsupported":
+        carried = [(s, t) for s, t in on]
+        if not carried:
+            return None
+        top, base = carried[int(rng.integers(len(carried)))]
+        k = ids.index(base)
+        for _ in range(20):
+            x = float(rng.uniform(PLACEMENT.x[0], PLACEMENT.x[1]))
+            y = float(rng.uniform(PLACEMENT.y[0], PLACEMENT.y[1]))
+            moved = [dict(r, pose=r["pose"].copy()) for r in g]
+            moved[k]["pose"][:2, 3] = (x, y)
+            moved[k]["pose"][2, 3] = g[k]["pose"][2, 3] - _floor(domain, g[k])
+            if not geometric_problems(domain, domain.scene(moved)) and top not in {
+                e["source"] for e in domain.reference_relations(moved)["edges"] if e["type"] == "on"
+            }:
+                return moved, f"'{top}' is left with nothing under it ('{base}' moved away)"
+        return None
+    if kind == "outside":
+        k = int(rng.integers(len(g)))
+        ang = float(rng.uniform(-np.pi, np.pi))
+        reach = float(rng.uniform(1.0, 1.4)) * domain.workspace.reach
+        g[k]["pose"][:2, 3] = reach * np.array([np.cos(ang), np.sin(ang)])
+        g[k]["pose"][2, 3] -= _floor(domain, g[k])
+        if not any("outside" in p.problem for p in geometric_problems(domain, domain.scene(g))):
+            return None
+        return g, f"'{ids[k]}' is out of the robot's reach"
+    raise ValueError(f"unknown infeasible kind {kind!r}")
+
+
+def _floor(domain: Domain, rec: Mapping) -> float:
+    """How far `rec`'s lowest point is above the table [m]."""
+    mesh = domain.meshes()[rec["mesh"]]
+    pose = np.asarray(rec["pose"], float)
+    return float((mesh.vertices @ pose[:3, :3].T + pose[:3, 3])[:, 2].min())

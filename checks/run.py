@@ -35,7 +35,7 @@ from checks.context import (
     check_runs,
     check_signature,
 )
-from checks.inputs import build_cases
+from checks.inputs import build_cases, fresh_seed
 from checks.report import CheckResult, build_report
 from checks.robot import RobotView
 from checks.rules import rule_map
@@ -57,6 +57,7 @@ def run_checks(
     executor: Executor | None = None,
     out_dir: Path | None = None,
     budget: Budget | None = None,
+    cases_seed: int | None = None,
 ) -> dict[str, Any]:
     """Run one draft's full checks and return its check report.
 
@@ -74,6 +75,8 @@ def run_checks(
             Docker backend, and fails loudly when Docker is unavailable.
         out_dir: where the overlay PNGs go (referenced by path in the report); None: no images.
         budget: overrides `thorough` (tests and benchmarks).
+        cases_seed: the seed the cases are drawn from (`checks.inputs`); None draws a fresh
+            one. The report records it: the same seed draws the same cases.
 
     Returns:
         A dict valid against `check_report.schema.json`.
@@ -86,7 +89,8 @@ def run_checks(
     budget = budget or (THOROUGH if thorough else DEFAULT)
     t0 = time.perf_counter()
     spec = DomainSpec.of(dom)
-    cases = build_cases(dom, function, budget)
+    seed = fresh_seed() if cases_seed is None else int(cases_seed)
+    cases = build_cases(dom, function, budget, seed)
     deps = {k: v for k, v in deps.items() if k in CODE_DEPS[function]}
     own = executor is None
     ex: sandbox.Executor = sandbox.open_executor("docker") if executor is None else executor
@@ -101,7 +105,7 @@ def run_checks(
     finally:
         if own:
             ex.close()
-    return build_report(
+    report = build_report(
         domain=domain,
         function=function,
         source=source,
@@ -109,6 +113,8 @@ def run_checks(
         duration_s=time.perf_counter() - t0,
         rules=rule_map(dom, function),
     )
+    report["cases_seed"] = seed
+    return report
 
 
 def _draft_checks(
@@ -130,7 +136,10 @@ def _draft_checks(
         if not load.ok:
             return checks, None
         draft = DraftCalls(
-            session=session, module=function, budget=float(budget.call_timeout[function])
+            session=session,
+            module=function,
+            budget=float(budget.call_timeout[function]),
+            objects=len(spec.catalogue),
         )
         checks.append(check_signature(function, draft.signature()))
         if checks[-1].failing:
@@ -186,7 +195,7 @@ def _relate_states(
                 got = CallResult.of(
                     session.call("relate", "relate", case[side], MESHES, timeout_s=timeout),
                     timeout,
-                )
+                ).bounded("relate", len(spec.catalogue))
                 case[f"{side}_relations"] = (
                     got.value
                     if got.ok and isinstance(got.value, dict)

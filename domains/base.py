@@ -39,6 +39,7 @@ from domains.benchmark import (
     benchmark_name,
     check_split,
 )
+from domains.cameras import CameraEnvelope
 from domains.catalogue import CameraSpec, MeshSpec, ObjectSpec, Tolerance
 from domains.errors import DomainError, GenerationError, UnknownObjectError
 from domains.generation import PhysicsCheck, draw_instance
@@ -197,6 +198,12 @@ class Domain:
         if name not in self.cameras:
             raise UnknownObjectError(self.name, "camera", name, tuple(self.cameras))
         return self.cameras[name].to_camera()
+
+    @cached_property
+    def camera_envelope(self) -> CameraEnvelope:
+        """The cameras this domain's programs must handle: an envelope around the named views
+        (`domains.cameras`); the checks draw `perceive`'s cameras from it."""
+        return CameraEnvelope.around(self.cameras.values())
 
     # -- reference relations -------------------------------------------------------------
 

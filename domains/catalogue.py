@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from domains.cameras import look_at, pinhole
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,19 +49,12 @@ class CameraSpec:
 
     def to_camera(self) -> dict:
         """The camera in the DESIGN format: K (3, 3) and T_world_camera (4, 4), OpenCV axes."""
-        p, t = np.array(self.position, float), np.array(self.target, float)
-        forward = (t - p) / np.linalg.norm(t - p)
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        down = np.cross(forward, right)
-        pose = np.eye(4)
-        pose[:3, :3] = np.stack([right, down, forward], axis=1)
-        pose[:3, 3] = p
-        f = (self.height / 2) / np.tan(np.radians(self.fovy) / 2)
-        k = np.array(
-            [[f, 0.0, (self.width - 1) / 2], [0.0, f, (self.height - 1) / 2], [0.0, 0.0, 1.0]]
-        )
-        return {"width": self.width, "height": self.height, "K": k, "T_world_camera": pose}
+        return {
+            "width": self.width,
+            "height": self.height,
+            "K": pinhole(self.width, self.height, self.fovy),
+            "T_world_camera": look_at(self.position, self.target),
+        }
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -237,6 +237,7 @@ def observe_with_truth(
     calibration_seed: int | None = None,
     noise: DepthNoise | None = _DEPTH_OF_LEVEL,
     mask: bool = False,
+    clean: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """An observation of a parsed scene (objects only, no robot) and its host-only truth.
 
@@ -249,6 +250,8 @@ def observe_with_truth(
         noise: replaces the level's depth model when passed; None gives the clean depth.
         mask: also return "mask": (H, W) int32, index of the visible object in
             ``scene["objects"]``, -1 for background (from the true camera, like the image).
+        clean: also put the clean render (rgb, depth before the sensor's effects) in the
+            truth as "clean_rgb", "clean_depth" (the image checks' reference, one render).
     Returns:
         (observation, truth): observation ``{"rgb": (H, W, 3) uint8, "depth": (H, W) float32
         [m], "camera": the CALIBRATED camera dict[, "mask"]}``, what `perceive` gets;
@@ -277,6 +280,7 @@ def observe_with_truth(
     )
     images = r.render(sm.data, cam, mask=mask, mask_ids=ids, lighting=lighting)
     exposure, white_balance = draw_gains(rng["gains"], level)
+    rendered = {"clean_rgb": images["rgb"], "clean_depth": images["depth"]} if clean else {}
     if level.varies_rgb:
         images["rgb"] = sensor_rgb(
             images["rgb"], rng["pixels"], level, exposure=exposure, white_balance=white_balance
@@ -292,6 +296,7 @@ def observe_with_truth(
         "exposure": float(exposure),
         "white_balance": np.asarray(white_balance, float),
         "calibration_error": calibration_error(calibrated, cam),
+        **rendered,
     }
     return {**images, "camera": calibrated}, truth
 

@@ -48,6 +48,11 @@ class ReplayClient:
     def author(self) -> Author:
         return self.transcript.written_by
 
+    @property
+    def cases_seed(self) -> int | None:
+        """The recorded run's check-case seed: replaying draws the same cases."""
+        return self.transcript.cases_seed
+
     def complete(self, request: ModelRequest) -> ModelResponse:
         self.budget.reserve(0.0)
         if self.strict:
@@ -99,6 +104,15 @@ class RecordingClient:
     @property
     def author(self) -> Author:
         return self.transcript.written_by
+
+    @property
+    def cases_seed(self) -> int | None:
+        """The inner client's recorded seed (a re-recorded replay keeps it), else none yet."""
+        return getattr(self.inner, "cases_seed", None)
+
+    def record_cases_seed(self, seed: int) -> None:
+        """Keep the run's check-case seed in the transcript (written with the next answer)."""
+        self.transcript.cases_seed = int(seed)
 
     def close(self) -> None:
         close = getattr(self.inner, "close", None)

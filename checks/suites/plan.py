@@ -88,9 +88,11 @@ RULES: tuple[Rule, ...] = (
     ),
     Rule(
         check="property.infeasible_explicit",
-        text="A goal no plan can reach (an object floating above its support, two objects in "
-        'one place) gets `{"status": "infeasible", "reason": str}`, never an exception '
-        "or steps.",
+        text="A goal no plan can reach gets `{\"status\": \"infeasible\", \"reason\": str}`, never "
+        "an exception or steps. The checks draw such goals afresh each time from the task's "
+        "goals: an object floating at some height above where it would rest, two objects "
+        "sunk into each other by some depth, a stack whose support was moved away, an object "
+        "out of the robot's reach.",
     ),
     Rule(
         check="property.gripper_room",

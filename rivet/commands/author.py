@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from contracts.errors import UsageError
+from rivet.commands._options import add_sandbox_option
 
 RUNS = Path("runs")
 
@@ -212,6 +213,7 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
                         checker=checker,
                         journal=journal,
                         max_attempts=args.attempts,
+                        cases_seed=getattr(client, "cases_seed", None),
                     ).run()
                 finally:
                     _close(client)
@@ -344,12 +346,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="author N independent systems (no freezing)",
     )
-    p.add_argument(
-        "--sandbox",
-        choices=("docker", "local"),
-        default="docker",
-        help="where drafts run (local isolates nothing)",
-    )
+    add_sandbox_option(p, what="drafts")
     p.add_argument("--thorough", action="store_true", help="more property-test examples per check")
     p.add_argument(
         "--ray",

@@ -5,6 +5,9 @@ function, an unreadable file). The functions the draft depends on come from `--d
 (`DIR/<name>.py`, e.g. the frozen `artifacts/cubes/`); where none is given, the domain's ground
 truth stands in for them (its reference relations when checking `plan`, the toolbox renderer
 when re-rendering what `perceive` found).
+
+The cases are drawn afresh on every run (`checks.inputs`); the report names the seed they were
+drawn from, and `--seed S` draws the same ones again.
 """
 
 from __future__ import annotations
@@ -44,7 +47,23 @@ def register(subparsers: Any) -> None:
         help="where overlay images go (default runs/checks/DOMAIN/FUNCTION-<draft hash>)",
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON instead")
+    p.add_argument(
+        "--seed",
+        type=_seed,
+        metavar="S",
+        help="draw the cases from seed S (default: a fresh seed, printed with the report)",
+    )
     p.set_defaults(handler=run)
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"must be in [0, 2**63), got {value}")
+    return value
 
 
 def _read(path: Path, what: str) -> str:
@@ -90,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
             thorough=args.thorough,
             executor=executor,
             out_dir=out,
+            cases_seed=args.seed,
         )
     if args.json:
         json.dump(report, sys.stdout, indent=1)
@@ -103,4 +123,7 @@ def run(args: argparse.Namespace) -> int:
         if standing_in:
             print(f"\n(ground truth stood in for: {', '.join(standing_in)})")
         print(f"images: {out}" if any(c.get("images") for c in report["checks"]) else "")
+        print(
+            f"cases drawn from seed {report['cases_seed']} (--seed {report['cases_seed']} draws them again)"
+        )
     return 0 if report["passed"] else 1

@@ -35,7 +35,7 @@ class ToyChecker:
     def __init__(self) -> None:
         self.calls: list[tuple[str, str]] = []
 
-    def check(self, domain, function, source, *, deps, out_dir: Path) -> dict:
+    def check(self, domain, function, source, *, deps, out_dir: Path, cases_seed=None) -> dict:
         self.calls.append((function, source))
         out_dir.mkdir(parents=True, exist_ok=True)
         draft = out_dir / "draft.py"

@@ -73,7 +73,7 @@ def _forging_checker(checker, tmp_path: Path):
     symlink out of the folder, a secret by its absolute path and a '..' path."""
     plain = checker.check
 
-    def check(domain, function, source, *, deps, out_dir):
+    def check(domain, function, source, *, deps, out_dir, cases_seed=None):
         report = plain(domain, function, source, deps=deps, out_dir=out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / "overlay.png").write_bytes(PNG)

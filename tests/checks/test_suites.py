@@ -179,7 +179,7 @@ def test_perceive_dropping_a_cube_nothing_shows_is_caught_on_the_hidden_scene(ch
     mutant = next(m for m in mutants if m.name == "perceive_drops_unshown")
     report = check("perceive", mutant.source)
     assert failing(report) == ["property.ids_match_catalogue"]
-    assert "hidden/seed" in by_name(report, "property.ids_match_catalogue")["message"]
+    assert "/hidden/" in by_name(report, "property.ids_match_catalogue")["message"]
 
 
 # -- images -----------------------------------------------------------------------------------

@@ -49,7 +49,7 @@ NEVER_PASSES = "# hand-made: fails its checks\n"
 class PassThroughChecker:
     """Hand-made stand-in for the check suite: passes every draft but one marked to fail."""
 
-    def check(self, domain, function, source, *, deps, out_dir: Path) -> dict:
+    def check(self, domain, function, source, *, deps, out_dir: Path, cases_seed=None) -> dict:
         ok = NEVER_PASSES not in source
         return {
             "schema_version": 1,

@@ -1,0 +1,159 @@
+"""Check cases are drawn afresh: from a seed, the same seed draws the same cases, each attempt of
+an authoring run draws new ones, and nothing the feedback of failing attempts shows identifies
+a case a later attempt is checked on (docs/checks.md, "What feedback shows")."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+import domains
+from checks import report_markdown
+from checks.budget import Budget
+from checks.inputs import build_cases, case_seed, infeasible_goal, instances
+from domains.cameras import shows
+
+from .conftest import CASES_SEED, deps_of
+
+SMALL = Budget(name="small", observations=3, hidden=1)
+
+# a perceive that finds the cubes' colours but puts every cube 3 cm off in x: wrong, and it
+# prints nothing of its inputs but what the checks' feedback reflects back
+SHIFTED = """
+import numpy as np
+
+from toolbox.errors import ToolboxError
+
+_IDS = ("red", "green", "blue", "yellow", "purple", "cyan")
+
+
+def perceive(observation, meshes, camera):
+    out = []
+    for k, oid in enumerate(_IDS):
+        pose = np.eye(4)
+        pose[:3, 3] = (0.40 + 0.05 * k, 0.03 * k - 0.08, 0.02)
+        out.append({"id": oid, "mesh": "cube", "pose": pose})
+    return out
+"""
+
+
+def _truth_xy(cases: dict) -> set[tuple[float, float]]:
+    return {
+        (round(float(r["pose"][0, 3]), 4), round(float(r["pose"][1, 3]), 4))
+        for case in cases["observations"]
+        for r in case["truth"]
+    }
+
+
+def _numbers(text: str) -> set[float]:
+    return {round(float(x), 4) for x in re.findall(r"-?\d+\.\d+", text)}
+
+
+def test_the_same_seed_draws_the_same_cases_and_attempts_draw_new_ones():
+    dom = domains.load("cubes")
+    a = build_cases(dom, "perceive", SMALL, seed=5)
+    b = build_cases(dom, "perceive", SMALL, seed=5)
+    assert [c["name"] for c in a["observations"]] == [c["name"] for c in b["observations"]]
+    for x, y in zip(a["observations"], b["observations"], strict=True):
+        assert np.array_equal(x["observation"]["rgb"], y["observation"]["rgb"])
+        np.testing.assert_array_equal(x["camera"]["T_world_camera"], y["camera"]["T_world_camera"])
+    seeds = {case_seed(99, "perceive", k) for k in range(1, 12)}
+    assert len(seeds) == 11  # a new draw for every attempt
+    other = build_cases(dom, "perceive", SMALL, seed=case_seed(99, "perceive", 2))
+    assert not _truth_xy(a) & _truth_xy(other)
+
+
+def test_perceive_is_called_as_the_trials_call_it():
+    """The calibrated camera (not the true one), the observation's full resolution, hiding
+    cases from the front camera and every other camera showing every object."""
+    dom = domains.load("cubes")
+    cases = build_cases(dom, "perceive", Budget(name="b", observations=8, hidden=1), seed=8)
+    obs = cases["observations"]
+    assert len(obs) == 8 and sum("/hidden/" in c["name"] for c in obs) == 1
+    for c in obs:
+        cam = c["observation"]["camera"]
+        assert c["observation"]["rgb"].shape[:2] == (cam["height"], cam["width"])
+        true_t = c["reference"]["full"]["camera"]["T_world_camera"]
+        assert np.array_equal(cam["T_world_camera"], true_t)  # what the draft gets …
+        if "/hidden/" not in c["name"]:
+            corners = np.array([r["pose"][:3, 3] for r in c["truth"]])
+            # … and the objects are in the frame (their centres, seen by the calibrated camera)
+            assert shows(cam, corners, margin=0.0)
+    drawn = [c for c in obs if "/drawn-" in c["name"]]
+    assert drawn, "no camera drawn from the envelope"
+    front = dom.camera("front")["T_world_camera"]
+    for c in obs:
+        if "/front-" in c["name"] or "/hidden/" in c["name"]:
+            # the calibrated camera is off the true one by the trials' calibration error
+            offset = np.linalg.norm(c["camera"]["T_world_camera"][:3, 3] - front[:3, 3])
+            assert 0.0 < offset < 0.01
+
+
+@pytest.mark.slow
+def test_failing_feedback_never_identifies_a_later_attempts_case(executor, tmp_path):
+    """Everything the feedback of 10 failing attempts shows (report JSON and the Markdown the
+    model reads) holds none of the true positions of the 11th attempt's cases — nor of its
+    own cases."""
+    from checks import run_checks
+
+    dom = domains.load("cubes")
+    shown: set[float] = set()
+    for attempt in range(1, 11):
+        seed = case_seed(CASES_SEED, "perceive", attempt)
+        report = run_checks(
+            "cubes",
+            "perceive",
+            SHIFTED,
+            deps=deps_of("perceive"),
+            executor=executor,
+            out_dir=tmp_path / str(attempt),
+            budget=SMALL,
+            cases_seed=seed,
+        )
+        assert not report["passed"] and report["cases_seed"] == seed
+        text = json.dumps(report) + report_markdown(report)
+        own = build_cases(dom, "perceive", SMALL, seed=seed)
+        numbers = _numbers(text)
+        mm = {round(v / 1000, 4) for v in numbers}
+        for x, y in _truth_xy(own):
+            assert not ({x, y} <= numbers or {x, y} <= mm), "a case's true position is shown"
+        shown |= numbers | mm
+    later = build_cases(dom, "perceive", SMALL, seed=case_seed(CASES_SEED, "perceive", 11))
+    for x, y in _truth_xy(later):
+        assert not {x, y} <= shown
+
+
+@pytest.mark.parametrize("kind", ["floating", "overlap", "unsupported", "outside"])
+@pytest.mark.parametrize("name", ["cubes", "tangram", "assembly"])
+def test_drawn_infeasible_goals_are_what_they_claim(name, kind):
+    """Each kind of unreachable goal is drawn with varying amounts and partners, and the oracle
+    geometry confirms what it claims (`infeasible_goal`)."""
+    from domains.generation import geometric_problems
+
+    dom = domains.load(name)
+    rng = np.random.default_rng(4)
+    pool = instances(dom, rng, 6)
+    got = []
+    for inst in pool * 4:
+        g = infeasible_goal(dom, [dict(r) for r in inst.goal["objects"]], kind, rng)
+        if g is not None:
+            got.append(g)
+    if kind == "unsupported" and name == "tangram":
+        assert not got  # tangram pieces lie flat on the table: nothing to undermine
+        return
+    assert len(got) >= 2, f"{kind}: no draw in {len(pool) * 4}"
+    reasons = {why for _, why in got}
+    assert len(reasons) >= 2  # amounts or partners vary
+    for goal, why in got:
+        problems = geometric_problems(dom, dom.scene(goal))
+        if kind == "overlap":
+            assert any("penetrates" in p.problem for p in problems), why
+        elif kind == "outside":
+            assert any("outside" in p.problem for p in problems), why
+        else:
+            assert not problems, why  # it floats: nothing else is wrong with it
+            edges = dom.reference_relations(goal)["edges"]
+            assert edges is not None
