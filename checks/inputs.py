@@ -29,12 +29,13 @@ from checks.budget import Budget
 from contracts.errors import UsageError
 from contracts.functions import FUNCTIONS
 from domains import Domain
-from domains.cameras import scaled
+from domains.cameras import resized
 
 HALF_RES = 2  # image checks render at 1/2 of the observation's resolution …
-IMAGE_FOCAL_MIN = 440.0  # [px] … or at full resolution where half would give a focal length
-# under this (about the named views' at half resolution): IoU on objects a few pixels wide
-# would judge the pixel grid, not the pose
+IMAGE_PIXEL_MAX = 0.0016  # [m] … or finer, so that a pixel covers at most this at the scene
+# (the named views at half resolution: 1.35-1.6 mm): IoU on objects a few pixels wide would
+# judge the pixel grid, not the pose
+IMAGE_SIZE_MAX = (1920, 1080)  # [px] the simulator's offscreen buffer
 # `perceive` is checked on observations exactly as the trials make them: `sim.realism`'s
 # default level (sensor noise, exposure, white balance, light, the stereo depth model) and
 # the calibrated camera (the true camera with the trials' calibration error)
@@ -225,9 +226,15 @@ def observation_case(
     unscored: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """One `perceive` case: the observation (and its calibrated camera) the draft gets, the
-    truth, and the simulator's clean view at `image_scale` for the image check (host only)."""
+    truth, and the simulator's clean view at `image_factor` for the image check (host only)."""
     full, clean = _realistic(domain, recs, true_camera, seed)
-    scale = image_scale(true_camera)
+    factor = image_factor(true_camera, recs)
+    if factor == 1 / HALF_RES:
+        reference = _subsample(clean, HALF_RES)
+    elif factor == 1:
+        reference = {k: clean[k] for k in ("rgb", "depth", "mask")}
+    else:  # a far or wide camera: the reference is rendered finer than the observation
+        reference = _observation(domain, recs, resized(true_camera, factor))
     case: dict[str, Any] = {
         "name": name,
         "observation": {"rgb": full["rgb"], "depth": full["depth"], "camera": full["camera"]},
@@ -235,10 +242,10 @@ def observation_case(
         "camera_name": camera_name,
         # the perceived records are in the calibrated camera's world: redrawn from it, they
         # land where the image shows the objects
-        "render_camera": scaled(full["camera"], scale),
+        "render_camera": resized(full["camera"], factor),
         "truth": recs,
-        "reference_camera": scaled(true_camera, scale),
-        "reference": {**_subsample(clean, scale), "full": full},
+        "reference_camera": resized(true_camera, factor),
+        "reference": {**reference, "full": full},
     }
     if unscored:
         # shown nowhere and holding nothing up: it must be reported, but where it stands the
@@ -247,10 +254,21 @@ def observation_case(
     return case
 
 
-def image_scale(camera: Mapping) -> int:
-    """The image check's resolution for a camera: 1/`HALF_RES`, or full resolution where that
-    would leave a focal length under `IMAGE_FOCAL_MIN`."""
-    return HALF_RES if float(np.asarray(camera["K"])[1, 1]) / HALF_RES >= IMAGE_FOCAL_MIN else 1
+def image_factor(camera: Mapping, recs: list[dict]) -> float:
+    """The image check's resolution for a camera, as a factor of its own: 1/`HALF_RES` where
+    a pixel then covers at most `IMAGE_PIXEL_MAX` at the scene's centre, else the smallest of
+    1, 1.5, 2, 3 that does (within `IMAGE_SIZE_MAX`)."""
+    t = np.asarray(camera["T_world_camera"], float)
+    centre = np.mean([np.asarray(r["pose"], float)[:3, 3] for r in recs], axis=0)
+    depth = float((centre - t[:3, 3]) @ t[:3, 2])
+    pixel = depth / float(np.asarray(camera["K"])[1, 1])  # [m] at full resolution
+    if pixel * HALF_RES <= IMAGE_PIXEL_MAX:
+        return 1 / HALF_RES
+    w, h = int(camera["width"]), int(camera["height"])
+    fits = [
+        f for f in (1.0, 1.5, 2.0, 3.0) if w * f <= IMAGE_SIZE_MAX[0] and h * f <= IMAGE_SIZE_MAX[1]
+    ]
+    return next((f for f in fits if pixel / f <= IMAGE_PIXEL_MAX), fits[-1])
 
 
 def perceive_cases(domain: Domain, budget: Budget, seed: int) -> list[dict[str, Any]]:

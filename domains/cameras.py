@@ -68,6 +68,21 @@ def scaled(camera: dict, scale: int) -> dict:
     }
 
 
+def resized(camera: dict, factor: float) -> dict:
+    """`camera` with its width and height times `factor` (rounded to even pixels): the same
+    view and field of view, finer or coarser pixels."""
+    h0 = int(camera["height"])
+    fovy = 2 * math.degrees(math.atan((h0 / 2) / float(np.asarray(camera["K"])[1, 1])))
+    w = 2 * max(1, round(int(camera["width"]) * factor / 2))
+    h = 2 * max(1, round(h0 * factor / 2))
+    return {
+        "width": w,
+        "height": h,
+        "K": pinhole(w, h, fovy),
+        "T_world_camera": np.array(camera["T_world_camera"], float),
+    }
+
+
 def project(camera: dict, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(pixels (N, 2), depth along the optical axis (N,)) of world `points` (N, 3)."""
     t = np.asarray(camera["T_world_camera"], float)

@@ -73,9 +73,9 @@ RULES: tuple[Rule, ...] = (
     Rule(
         check="image.perceive_rerender",
         text="The frozen `render` of your records is compared, per object, with the "
-        "simulator's silhouettes and depth of the observed scene (at the observation's width and "
-        "height divided by {checks.inputs:HALF_RES}, or at full resolution where that would give a "
-        "focal length under {checks.inputs:IMAGE_FOCAL_MIN|px}; an object showing less than "
+        "simulator's silhouettes and depth of the observed scene (at a resolution where a pixel "
+        "covers at most {checks.inputs:IMAGE_PIXEL_MAX|mm} at the scene: half the "
+        "observation's, or finer for a far or wide camera; an object showing less than "
         "{checks.suites.perceive:MIN_VISIBLE_SHARE|pct} of its own silhouette is judged by "
         "`property.accuracy` only): silhouette IoU at "
         "least {checks.images:IOU_MIN}, mean IoU at least {checks.images:IOU_MEAN_MIN}, median "

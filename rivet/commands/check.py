@@ -1,4 +1,6 @@
 """`rivet check DOMAIN FUNCTION FILE.py`: one draft's full checks in the sandbox; prints the report.
+`rivet check DOMAIN --system DIR`: the trial gate alone on a folder of four programs
+(`artifacts.gate`): simulated trials on fresh tasks, each through its own drawn camera.
 
 Exit 0 when every check passes, 1 when one fails, 2 for bad input (an unknown domain or
 function, an unreadable file). The functions the draft depends on come from `--deps DIR`
@@ -30,8 +32,17 @@ def register(subparsers: Any) -> None:
         description=__doc__,
     )
     p.add_argument("domain", metavar="DOMAIN")
-    p.add_argument("function", choices=FUNCTIONS, metavar="FUNCTION", help=", ".join(FUNCTIONS))
-    p.add_argument("file", type=Path, metavar="FILE.py")
+    p.add_argument(
+        "function", nargs="?", choices=FUNCTIONS, metavar="FUNCTION", help=", ".join(FUNCTIONS)
+    )
+    p.add_argument("file", nargs="?", type=Path, metavar="FILE.py")
+    p.add_argument(
+        "--system",
+        type=Path,
+        metavar="DIR",
+        help="run the trial gate alone on DIR/{render,perceive,relate,plan}.py instead",
+    )
+    p.add_argument("--trials", type=_positive, metavar="K", help="trials of the gate (default: 8)")
     p.add_argument("--thorough", action="store_true", help="more instances and examples (slower)")
     p.add_argument(
         "--deps",
@@ -54,6 +65,16 @@ def register(subparsers: Any) -> None:
         help="draw the cases from seed S (default: a fresh seed, printed with the report)",
     )
     p.set_defaults(handler=run)
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
 
 
 def _seed(text: str) -> int:
@@ -94,6 +115,14 @@ def run(args: argparse.Namespace) -> int:
     from checks import report_markdown, run_checks
 
     domains.load(args.domain)  # an unknown domain is a usage error, before any work
+    if args.system is not None:
+        if args.function is not None or args.file is not None:
+            raise UsageError("--system DIR runs the trial gate alone: give no FUNCTION or FILE")
+        return _gate(args)
+    if args.function is None or args.file is None:
+        raise UsageError("give FUNCTION and FILE.py (or --system DIR for the trial gate)")
+    if args.trials is not None:
+        raise UsageError("--trials is the trial gate's: use it with --system DIR")
     source = _read(args.file, "draft")
     deps = dependencies(args.function, args.deps)
     standing_in = [d for d in CODE_DEPS[args.function] if d not in deps]
@@ -127,3 +156,38 @@ def run(args: argparse.Namespace) -> int:
             f"cases drawn from seed {report['cases_seed']} (--seed {report['cases_seed']} draws them again)"
         )
     return 0 if report["passed"] else 1
+
+
+def _gate(args: argparse.Namespace) -> int:
+    """The trial gate on a folder of four programs: exit 0 passed, 1 failed."""
+    import sys
+
+    from artifacts.gate import GATE_TRIALS, run_gate
+    from artifacts.runtime import read_programs
+    from checks.inputs import fresh_seed
+
+    if not args.system.is_dir():
+        raise UsageError(f"--system {args.system}: not a folder")
+    try:
+        sources = read_programs(args.system)
+    except Exception as e:  # an ArtifactError naming the missing file
+        raise UsageError(str(e)) from None
+    seed = fresh_seed() if args.seed is None else args.seed
+    result = run_gate(
+        args.domain,
+        sources,
+        seed=seed,
+        trials=args.trials or GATE_TRIALS,
+        sandbox=args.sandbox,
+        out_dir=args.out,
+        progress=lambda line: print(line, file=sys.stderr, flush=True),
+    )
+    if args.json:
+        json.dump(result.to_dict(), sys.stdout, indent=1)
+        print()
+    else:
+        print(result.markdown())
+        print(
+            f"\ntrials drawn from seed {seed} (--seed {seed} draws them again); {result.duration_s:.0f} s"
+        )
+    return 0 if result.passed else 1

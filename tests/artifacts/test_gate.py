@@ -1,0 +1,82 @@
+"""The trial gate (`artifacts.gate`, `rivet check D --system DIR`): fresh tasks through drawn
+cameras, failures held against the function whose stage failed."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from artifacts.gate import GATE_TRIALS, gate_instances, run_gate
+
+REPO = Path(__file__).resolve().parents[2]
+PROGRAMS = REPO / "domains" / "cubes" / "programs"
+
+
+def sources() -> dict[str, str]:
+    return {f: (PROGRAMS / f"{f}.py").read_text() for f in ("render", "perceive", "relate", "plan")}
+
+
+def test_gate_tasks_are_fresh_and_seen_through_their_own_cameras():
+    import domains
+    from domains.cameras import shows
+
+    dom = domains.load("cubes")
+    a = gate_instances(dom, 3, 4)
+    b = gate_instances(dom, 3, 4)
+    c = gate_instances(dom, 4, 4)
+    assert len(a) == 4 and [i.name for i, _ in a] == [i.name for i, _ in b]
+    assert {i.name for i, _ in a}.isdisjoint({i.name for i, _ in c})
+    assert any(i.name.startswith("composed/") for i, _ in a)
+    cams = {tuple(cam["T_world_camera"][:3, 3].round(4)) for _, cam in a}
+    assert len(cams) == 4  # no two trials share a view
+    for inst, cam in a:
+        import numpy as np
+
+        centres = np.array([o["pose"][:3, 3] for o in inst.start["objects"]])
+        assert shows(cam, np.asarray(centres, float))
+
+
+@pytest.mark.slow
+def test_a_perceive_that_is_off_is_blamed_and_the_reference_set_passes(tmp_path):
+    good = run_gate("cubes", sources(), seed=5, trials=2, sandbox="local", out_dir=tmp_path / "a")
+    assert good.passed, good.markdown()
+    assert all(t["final_ok"] for t in good.trials) and (tmp_path / "a" / "gate.json").is_file()
+    off = sources()
+    off["perceive"] = off["perceive"].replace(
+        "def perceive(observation, meshes, camera):",
+        "def perceive(observation, meshes, camera):\n    return _shifted(_perceive(observation, meshes, camera))\n\n\n"
+        "def _shifted(records):\n    for r in records:\n        r['pose'][0, 3] += 0.03\n    return records\n\n\n"
+        "def _perceive(observation, meshes, camera):",
+    )
+    assert off["perceive"] != sources()["perceive"]
+    bad = run_gate("cubes", off, seed=5, trials=2, sandbox="local", out_dir=tmp_path / "b")
+    assert not bad.passed and bad.blamed == "perceive"
+    blamed = next(t for t in bad.trials if t["blamed"])
+    assert blamed["failure"]["stage"] == "perception"
+    assert "held against `perceive`" in bad.markdown()
+    assert all(Path(p).is_file() for p in bad.images[blamed["name"]])
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--system", "{tmp}/nowhere"], "not a folder"),
+        (["perceive", "x.py", "--system", "."], "give no FUNCTION or FILE"),
+        (["perceive"], "give FUNCTION and FILE.py"),
+        (["perceive", "x.py", "--trials", "2"], "--trials is the trial gate's"),
+    ],
+)
+def test_gate_usage_errors(argv, message, tmp_path):
+    got = subprocess.run(
+        [sys.executable, "-m", "rivet.cli", "check", "cubes", *(a.format(tmp=tmp_path) for a in argv)],
+        capture_output=True, text=True, cwd=REPO, timeout=120,
+    )  # fmt: skip
+    assert got.returncode == 2, got.stderr
+    assert message in got.stderr and "Traceback" not in got.stderr
+
+
+def test_the_default_gate_is_documented():
+    assert f"`GATE_TRIALS` = {GATE_TRIALS}" in (REPO / "docs" / "checks.md").read_text()
