@@ -240,11 +240,12 @@ def observation_case(
         "observation": {"rgb": full["rgb"], "depth": full["depth"], "camera": full["camera"]},
         "camera": full["camera"],
         "camera_name": camera_name,
-        # the perceived records are in the calibrated camera's world: redrawn from it, they
-        # land where the image shows the objects
-        "render_camera": resized(full["camera"], factor),
+        # the perceived records are judged where they are in the world: redrawn from the true
+        # camera (the judge's, never the draft's), an error of the calibration the draft left
+        # uncorrected shows as it does in the trials
+        "render_camera": (judge_camera := resized(true_camera, factor)),
         "truth": recs,
-        "reference_camera": resized(true_camera, factor),
+        "reference_camera": judge_camera,
         "reference": {**reference, "full": full},
     }
     if unscored:
