@@ -28,6 +28,11 @@ def pack(args: argparse.Namespace) -> int:
     if staging.exists():
         shutil.rmtree(staging)
     client = packing_client(folder, staging, domain.name, tuple(args.names))
+    seed = args.seed
+    if seed is None and (out / "meta.json").is_file():
+        from agent.transcript import Transcript
+
+        seed = Transcript.load(out).cases_seed  # re-packing keeps the cases it was checked on
     ctx = build_context(domain, reference_observations(domain), toolbox_docs())
     checker = SuiteChecker(sandbox=args.sandbox)
     run = AuthoringRun(
@@ -36,6 +41,7 @@ def pack(args: argparse.Namespace) -> int:
         checker=checker,
         journal=Journal(new_run_dir(Path("runs"), domain.name)),
         max_attempts=max(4, max(len(s) for s in sequence.values())),
+        cases_seed=seed,
     )
     try:
         run.run()
@@ -64,5 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("programs", metavar="PROGRAMS_DIR")
     q.add_argument("--out", default=None, help="default: domains/DOMAIN/transcripts/reference")
     q.add_argument("--names", nargs="+", default=["the RIVET team"], help="who wrote the programs")
+    q.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        metavar="S",
+        help="the run's check-case seed (default: the existing transcript's, else a fresh one)",
+    )
     add_sandbox_option(q, what="the replayed drafts")
     q.set_defaults(handler=pack)
