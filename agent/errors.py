@@ -73,3 +73,16 @@ class AuthoringExhausted(AgentError):
 
 class TranscriptError(UsageError):
     """A transcript folder is missing or malformed."""
+
+
+class GateFailed(AgentError):
+    """The candidate set kept failing the trial gate (`artifacts.gate`) for its rounds."""
+
+    def __init__(self, rounds: int, blamed: str, run_dir: str) -> None:
+        self.rounds = rounds
+        self.blamed = blamed
+        self.run_dir = run_dir
+        super().__init__(
+            f"the candidate set failed the trial gate in {rounds} rounds, the last held against "
+            f"'{blamed}'; the trials' reports are in {run_dir}/gate/. Nothing was frozen."
+        )

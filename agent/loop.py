@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Protocol
 
 from agent.clients.base import STOP_MAX_TOKENS, ImageBlock, ModelClient
-from agent.errors import AgentError, AuthoringExhausted, BudgetExceeded
+from agent.errors import AgentError, AuthoringExhausted, BudgetExceeded, GateFailed
 from agent.extract import (
     TRUNCATED_CHECK,
     DraftFormatError,
@@ -51,6 +51,26 @@ class Checker(Protocol):
     ) -> dict: ...
 
     def markdown(self, report: dict) -> str: ...
+
+
+class GateOutcome(Protocol):
+    """What a trial gate run found (`artifacts.gate.GateResult` is one)."""
+
+    @property
+    def passed(self) -> bool: ...
+
+    @property
+    def blamed(self) -> str | None: ...
+
+    images: dict[str, list[str]]
+    trials: list[dict]
+
+    def markdown(self) -> str: ...
+
+
+# (frozen sources, seed, folder for its files) → outcome
+Gate = Callable[[dict[str, str], int, Path], GateOutcome]
+GATE_ROUNDS = 3  # gate runs before an authoring run gives up on a set that keeps failing trials
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -95,9 +115,13 @@ class AuthoringRun:
         max_tokens: int = DEFAULT_MAX_TOKENS,
         max_tokens_cap: int = MAX_TOKENS_CAP,
         cases_seed: int | None = None,
+        gate: Gate | None = None,
+        gate_rounds: int = GATE_ROUNDS,
     ) -> None:
         self.ctx = ctx
         self.cases_seed = cases_seed
+        self.gate = gate
+        self.gate_rounds = gate_rounds
         self.client = client
         self.checker = checker
         self.journal = journal
@@ -130,8 +154,76 @@ class AuthoringRun:
                 self.progress(f"[{function}] frozen earlier in this run")
                 continue
             frozen[function] = self._author(function, frozen)
+        if self.gate is not None:
+            frozen = self._gated(frozen)
         self.journal.event("finished")
         return frozen
+
+    def _gated(self, frozen: dict[str, str]) -> dict[str, str]:
+        """Run the trial gate on the candidate set; a failure goes back as the feedback of the
+        blamed function's next attempt, and the functions after it are checked again (and
+        repaired where they now fail), until the gate passes or `gate_rounds` are spent."""
+        order = authoring_order()
+        for rnd in range(1, self.gate_rounds + 1):
+            seed = case_seed(self.cases_seed, "gate", rnd)
+            self._say("gate", rnd, "running the trial gate")
+            outcome = self.gate(dict(frozen), seed, self.journal.dir / "gate" / f"round{rnd}")
+            self.journal.event(
+                "gate",
+                round=rnd,
+                seed=seed,
+                passed=outcome.passed,
+                blamed=outcome.blamed,
+                trials=outcome.trials,
+            )
+            if outcome.passed:
+                self._say("gate", rnd, "passed")
+                return frozen
+            blamed = outcome.blamed
+            assert blamed is not None
+            self._say("gate", rnd, f"failed: held against {blamed}")
+            if rnd == self.gate_rounds:
+                self.journal.event("gate_failed", rounds=rnd, blamed=blamed)
+                raise GateFailed(rnd, blamed, str(self.journal.dir))
+            images = _gate_images(outcome, self.journal.dir)
+            feedback = Feedback(
+                draft=frozen[blamed], report_markdown=outcome.markdown(), images=images
+            )
+            frozen[blamed] = self._author(
+                blamed, frozen, first=self._next_attempt(blamed), feedback=feedback
+            )
+            for later in order[order.index(blamed) + 1 :]:
+                frozen[later] = self._recheck(later, frozen)
+        raise AssertionError("unreachable")
+
+    def _next_attempt(self, function: str) -> int:
+        return self.journal.state().attempts.get(function, 0) + 1
+
+    def _recheck(self, function: str, frozen: dict[str, str]) -> str:
+        """A frozen function checked again against its (changed) dependencies: kept when it
+        still passes, repaired from its next attempt when not."""
+        attempt = self._next_attempt(function)
+        out = self.journal.images_dir(function, attempt) / "recheck"
+        deps = {d: frozen[d] for d in CODE_DEPS[function]}
+        self._say(function, attempt, "checking the frozen version against its new dependencies")
+        report = self.checker.check(
+            self.ctx.domain,
+            function,
+            frozen[function],
+            deps=deps,
+            out_dir=out,
+            cases_seed=case_seed(self.cases_seed, f"{function}/recheck", attempt),
+        )
+        self.journal.event("rechecked", function=function, passed=bool(report["passed"]))
+        if report["passed"]:
+            return frozen[function]
+        images, _ = _report_images(report, out)
+        feedback = Feedback(
+            draft=frozen[function],
+            report_markdown=self.checker.markdown(report),
+            images=images,
+        )
+        return self._author(function, frozen, first=attempt, feedback=feedback)
 
     def _run_cases_seed(self) -> int:
         """The run's check-case seed: the journal's (a resumed run), else the one given (a
@@ -154,18 +246,27 @@ class AuthoringRun:
             f"out {st.usage.output_tokens} tok, ${st.spent_usd:.2f}, {time.monotonic() - self._t0:.0f}s)"
         )
 
-    def _author(self, function: str, frozen: dict[str, str]) -> str:
-        feedback: Feedback | None = None
+    def _author(
+        self,
+        function: str,
+        frozen: dict[str, str],
+        *,
+        first: int = 1,
+        feedback: Feedback | None = None,
+    ) -> str:
+        """Attempts `first` … `first + max_attempts - 1` of `function` (after the trial gate
+        or a re-check, `first` continues the run's numbering with `feedback` to start from)."""
         best: Attempt | None = None
         max_tokens = self.max_tokens
-        for attempt in range(1, self.max_attempts + 1):
+        last = first + self.max_attempts - 1
+        for attempt in range(first, last + 1):
             request = build_request(
                 self.ctx,
                 function,
                 attempt,
                 frozen=frozen,
                 feedback=feedback,
-                max_attempts=self.max_attempts,
+                max_attempts=last,
                 max_tokens=max_tokens,
             )
             text = self.journal.saved_response(function, attempt)
@@ -275,6 +376,20 @@ class AuthoringRun:
             str(self.journal.dir),
             f"best attempt: {best.attempt} (first failure: {best.report.get('first_failure')})",
         )
+
+
+def _gate_images(outcome: GateOutcome, run_dir: Path, limit: int = 4) -> tuple[ImageBlock, ...]:
+    """The blamed trials' observations, read only from the run's own folder."""
+    out: list[ImageBlock] = []
+    for trial in outcome.trials:
+        if not trial.get("blamed"):
+            continue
+        for path in outcome.images.get(trial["name"], []):
+            data, _ = report_image(path, run_dir)
+            if data is not None and len(out) < limit:
+                caption = f"trial gate, {trial['name']}: the {Path(path).stem} observation"
+                out.append(ImageBlock(png=data, caption=sanitise_text(caption)))
+    return tuple(out)
 
 
 def _report_images(

@@ -15,6 +15,8 @@ from pathlib import Path
 from contracts.errors import UsageError
 from rivet.commands._options import add_sandbox_option
 
+GATE_TRIALS = 8  # artifacts.gate.GATE_TRIALS (not imported here: the CLI starts light)
+
 RUNS = Path("runs")
 
 
@@ -156,6 +158,8 @@ def _author_on_ray(args: argparse.Namespace, domain: str, runs_root: Path) -> in
                 str(args.attempts),
                 "--sandbox",
                 args.sandbox,
+                "--gate-trials",
+                str(args.gate_trials),
             ]
             + (["--max-usd", repr(share)] if share is not None else [])
             + (["--max-calls", str(args.max_calls)] if args.max_calls is not None else [])
@@ -214,6 +218,7 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
                         journal=journal,
                         max_attempts=args.attempts,
                         cases_seed=getattr(client, "cases_seed", None),
+                        gate=_gate(args, domain.name),
                     ).run()
                 finally:
                     _close(client)
@@ -257,6 +262,36 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
         if ledger.calls and (args.model or args.agent):
             limit = f" of --max-usd {ledger.max_usd:.2f}" if ledger.max_usd is not None else ""
             print(f"spent ${ledger.spent_usd:.2f}{limit} in {ledger.calls} calls", file=sys.stderr)
+
+
+def _trials(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def _gate(args, domain: str):
+    """The trial gate the run's candidate set must pass before it is frozen (None: off)."""
+    if not args.gate_trials:
+        return None
+    from artifacts.gate import run_gate
+
+    def gate(sources: dict[str, str], seed: int, out: Path):
+        return run_gate(
+            domain,
+            sources,
+            seed=seed,
+            trials=args.gate_trials,
+            sandbox=args.sandbox,
+            out_dir=out,
+            progress=lambda line: print(line, file=sys.stderr, flush=True),
+        )
+
+    return gate
 
 
 def _close(client) -> None:
@@ -329,6 +364,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--attempts", type=int, default=4, metavar="K", help="attempts per function (default 4)"
+    )
+    p.add_argument(
+        "--gate-trials",
+        type=_trials,
+        default=GATE_TRIALS,
+        metavar="K",
+        help=f"simulated trials of the gate the set must pass before it is frozen (default "
+        f"{GATE_TRIALS}; 0: no gate, docs/checks.md 'The trial gate')",
     )
     p.add_argument(
         "--max-usd",

@@ -140,7 +140,7 @@ def test_failure_images_reach_the_model_and_the_html_report(tmp_path, checker, m
     monkeypatch.chdir(tmp_path)
     plain = checker.check
 
-    def with_image(domain, function, source, *, deps, out_dir):
+    def with_image(domain, function, source, *, deps, out_dir, cases_seed=None):
         report = plain(domain, function, source, deps=deps, out_dir=out_dir)
         png = out_dir / "overlay.png"
         Image.new("RGB", (8, 8), (255, 0, 0)).save(png)
@@ -160,3 +160,86 @@ def test_failure_images_reach_the_model_and_the_html_report(tmp_path, checker, m
     assert any(isinstance(b, ImageBlock) for b in repair.content)
     html = write_report(r.journal, "toy").read_text()
     assert html.count("data:image/png;base64") >= 2
+
+
+# -- the trial gate ----------------------------------------------------------------------------
+
+
+class ToyGate:
+    """A real, tiny gate: it runs the candidate set's `perceive` and `plan` in a subprocess on
+    a 'task' (the round's seed) and holds a failure against the function whose answer is not
+    right for it — `perceive` must pass the toy check and say it sees the task."""
+
+    def __init__(self, checker) -> None:
+        self.checker = checker
+        self.rounds: list[dict[str, str]] = []
+
+    def __call__(self, sources, seed, out):
+        from dataclasses import dataclass, field
+
+        self.rounds.append(dict(sources))
+        report = self.checker.check("toy", "perceive", sources["perceive"], deps={}, out_dir=out)
+        seen = "# sees the task" in sources["perceive"]
+        blamed = None if (report["passed"] and seen) else "perceive"
+
+        @dataclass
+        class Outcome:
+            passed: bool
+            blamed: str | None
+            trials: list = field(default_factory=list)
+            images: dict = field(default_factory=dict)
+
+            def markdown(self) -> str:
+                return f"**trial gate**: task {seed}: " + (
+                    "passed" if self.passed else "perceive saw nothing"
+                )
+
+        trial = {"name": "trial01/toy", "blamed": blamed, "final_ok": blamed is None}
+        return Outcome(passed=blamed is None, blamed=blamed, trials=[trial])
+
+
+def good_seen(function: str) -> str:
+    return f"```python\ndef {function}():  # sees the task\n    return {{'ok': True}}\n```\n"
+
+
+def test_a_gate_failure_goes_back_to_the_blamed_function_and_later_ones_are_rechecked(
+    tmp_path, checker
+):
+    """The four pass their checks; the gate holds the set against `perceive`; its next attempt
+    (attempt 2) is asked with the gate's report as feedback, `relate` and `plan` are checked
+    again against it (no new answers: they still pass), and the gate then passes."""
+    from checks.inputs import case_seed
+
+    gate = ToyGate(checker)
+    client = ScriptedClient([*(good(f) for f in ORDER), good_seen("perceive")])
+    r = run(tmp_path, client, checker, gate=gate, cases_seed=11)
+    frozen = r.run()
+    assert "# sees the task" in frozen["perceive"] and len(gate.rounds) == 2
+    repair = client.requests[-1]
+    assert (repair.function, repair.attempt) == ("perceive", 2)
+    assert "perceive saw nothing" in repair.text() and "return {'ok': True}" in repair.text()
+    events = Journal(tmp_path / "run").events()
+    gates = [e for e in events if e["event"] == "gate"]
+    assert [g["passed"] for g in gates] == [False, True] and gates[0]["blamed"] == "perceive"
+    assert gates[0]["seed"] == case_seed(11, "gate", 1)
+    assert [e["function"] for e in events if e["event"] == "rechecked"] == ["relate", "plan"]
+    # gate 1 (its perceive), the repair, the two re-checks, gate 2
+    assert [f for f, _ in checker.calls][-5:] == [
+        "perceive",
+        "perceive",
+        "relate",
+        "plan",
+        "perceive",
+    ]
+
+
+def test_a_gate_that_keeps_failing_ends_the_run_with_a_clear_status(tmp_path, checker):
+    gate = ToyGate(checker)
+    client = ScriptedClient([*(good(f) for f in ORDER), good("perceive"), good("perceive")])
+    from agent.errors import GateFailed
+
+    with pytest.raises(
+        GateFailed, match=r"failed the trial gate in 2 rounds, the last held against 'perceive'"
+    ):
+        run(tmp_path, client, checker, gate=gate, gate_rounds=2).run()
+    assert not any(e["event"] == "finished" for e in Journal(tmp_path / "run").events())
