@@ -99,7 +99,7 @@ def run_checks(
             _relate_states(ex, deps, cases, spec, budget)
         checks, ctx = _draft_checks(ex, dom, spec, function, source, deps, cases, budget, out_dir)
         if ctx is not None and function == "perceive":
-            renders = _rerender(ex, deps, ctx, spec, budget)
+            renders = perceive_suite.aligned(ctx, _rerender(ex, deps, ctx, spec, budget))
             checks.append(perceive_suite.accuracy(ctx, dom, renders, out_dir))
             checks.append(perceive_suite.rerender(ctx, renders, out_dir))
     finally:

@@ -77,7 +77,8 @@ RULES: tuple[Rule, ...] = (
         "covers at most {checks.inputs:IMAGE_PIXEL_MAX|mm} at the scene: half the "
         "observation's, or finer for a far or wide camera; an object showing less than "
         "{checks.suites.perceive:MIN_VISIBLE_SHARE|pct} of its own silhouette is judged by "
-        "`property.accuracy` only): silhouette IoU at "
+        "`property.accuracy` only; the whole re-render may be shifted by what the calibration "
+        "error can move the image by): silhouette IoU at "
         "least {checks.images:IOU_MIN}, mean IoU at least {checks.images:IOU_MEAN_MIN}, median "
         "depth error at most {checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object "
         "(objects shown with fewer than {checks.images:MIN_AREA|px} are not scored). An object "
@@ -406,6 +407,64 @@ def accuracy(
 
 
 MIN_VISIBLE_SHARE = 0.3  # an object showing less of its own silhouette is not scored by IoU
+
+
+def calibration_pixels(case: Mapping[str, Any]) -> int:
+    """How far [px], at the image check's resolution, the trials' calibration error can move
+    the image of the scene: its rotation plus its translation seen at the scene's depth."""
+    from sim.realism import DEFAULT as REALISM
+
+    cam = case["render_camera"]
+    t = np.asarray(cam["T_world_camera"], float)
+    centre = np.mean([np.asarray(o["pose"], float)[:3, 3] for o in case["truth"]], axis=0)
+    depth = max(float((centre - t[:3, 3]) @ t[:3, 2]), 0.1)
+    angle = REALISM.calib_rotation + REALISM.calib_translation / depth
+    return int(np.ceil(angle * float(np.asarray(cam["K"])[1, 1])))
+
+
+def aligned(ctx: SuiteContext, renders: Mapping[str, Any]) -> dict[str, Any]:
+    """Each re-render shifted, as a whole, by the image translation of at most
+    `calibration_pixels` that makes the most pixels agree with the observed objects: a draft
+    judged on poses in a miscalibrated camera's world is not held to the calibration error
+    (its poses are, by `property.accuracy`, as in the trials)."""
+    out = dict(renders)
+    for case in ctx.cases["observations"]:
+        got = renders.get(case["name"])
+        if got is None or "error" in got:
+            continue
+        ids = [o["id"] for o in case["truth"]]
+        ref = np.asarray(case["reference"]["mask"])
+        index = {oid: k for k, oid in enumerate(ids)}
+        mask = np.asarray(got["mask"])
+        if mask.shape != ref.shape:
+            continue  # `image.perceive_rerender` says so
+        lut = np.array([index.get(str(i), -2) for i in got["ids"]] + [-1], dtype=np.int64)
+        same = lut[np.where(mask >= 0, mask, len(got["ids"]))]  # candidate in reference ids
+        k = calibration_pixels(case)
+        best, shift = -1, (0, 0)
+        for dy in range(-k, k + 1):
+            for dx in range(-k, k + 1):
+                moved = _shift(same, dy, dx, -1)
+                score = int(((moved == ref) & (ref >= 0)).sum())
+                if score > best or (score == best and abs(dy) + abs(dx) < sum(map(abs, shift))):
+                    best, shift = score, (dy, dx)
+        if shift != (0, 0):
+            out[case["name"]] = dict(
+                got,
+                mask=_shift(mask, *shift, -1),
+                depth=_shift(np.asarray(got["depth"]), *shift, 0.0),
+                shift_px=shift,
+            )
+    return out
+
+
+def _shift(a: np.ndarray, dy: int, dx: int, fill: Any) -> np.ndarray:
+    out = np.full_like(a, fill)
+    h, w = a.shape[:2]
+    ys, yd = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
+    xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
+    out[yd, xd] = a[ys, xs]
+    return out
 
 
 def mostly_hidden(ctx: SuiteContext, case: dict, m: images.ObjectMatch) -> bool:
