@@ -4,7 +4,10 @@ Design rule: frozen programs are model-written code. They run in a sandbox sessi
 default; the local backend when asked for by name), never in the caller's process, so nothing
 the caller holds — a trial's ground truth, the user's environment — is in their reach; they get
 the observation, the meshes and the camera, and nothing else. No model calls, and a file whose
-hash does not match its manifest is refused, with the file named.
+hash does not match its manifest is refused, with the file named. What a program returns is
+counted before anything reads it (`contracts.limits`: records within the domain's catalogue,
+edges within what its objects allow, plan steps within the contract's cap), so a program's
+answer cannot make the next program's input, or the robot's plan, grow without bound.
 
     system = load("cubes")
     with system.runner(executor) as run:
@@ -23,6 +26,7 @@ from typing import Any
 from artifacts.errors import ArtifactError, ProgramFailed
 from artifacts.store import verify
 from contracts.functions import FUNCTIONS, authoring_order
+from contracts.limits import clip, count_problem
 from sandbox import MESHES, CallReport, Executor, Program
 
 CALL_TIMEOUT_S = 30.0  # [s] one call of a frozen function (its checks held it to far less)
@@ -30,12 +34,18 @@ CALL_TIMEOUT_S = 30.0  # [s] one call of a frozen function (its checks held it t
 
 @dataclass
 class System:
-    """A domain's frozen programs (their sources), ready to be loaded into a sandbox."""
+    """A domain's frozen programs (their sources), ready to be loaded into a sandbox.
+
+    Attributes:
+        objects: the domain's catalogue size, which bounds what the programs may return
+            (`contracts.limits`; None: only the plan's step cap applies).
+    """
 
     domain: str
     manifest: dict[str, Any]
     sources: dict[str, str]
     meshes: dict[str, Any] = field(default_factory=dict)
+    objects: int | None = None
 
     def program(self) -> Program:
         ordered = {name: self.sources[name] for name in authoring_order() if name in self.sources}
@@ -81,7 +91,13 @@ class Runner:
     def _call(self, name: str, *args: Any) -> tuple[Any, CallReport]:
         got = self.session.call(name, name, *args, timeout_s=self.timeout_s)
         if not got.ok:
-            raise ProgramFailed(f"the frozen `{name}` {_why(got)}")
+            raise ProgramFailed(f"the frozen `{name}` {_why(got)}", function=name)
+        problem = count_problem(name, got.value, objects=self.system.objects)
+        if problem is not None:
+            raise ProgramFailed(
+                f"the frozen `{name}` returned a value that cannot be used ({problem})",
+                function=name,
+            )
         return got.value, got
 
     def perceive(self, observation: Mapping[str, Any]) -> list[dict]:
@@ -129,10 +145,10 @@ class Runner:
 
 def _why(report: CallReport) -> str:
     if report.verdict == "exception" and report.exception is not None:
-        return f"raised {report.exception.type}: {report.exception.message[:500]}"
+        return f"raised {clip(report.exception.type, 100)}: {clip(report.exception.message)}"
     if report.verdict == "timeout":
         return "did not return in time"
-    return f"failed ({report.verdict}: {report.detail[:300]})"
+    return f"failed ({report.verdict}: {clip(report.detail)})"
 
 
 def read_programs(folder: Path) -> dict[str, str]:
@@ -146,20 +162,48 @@ def read_programs(folder: Path) -> dict[str, str]:
     return sources
 
 
-def load(domain: str, root: Path | None = None, *, meshes: dict[str, Any] | None = None) -> System:
-    """Verify `artifacts/<domain>/` against its manifest; the system, ready for a sandbox."""
+def load(
+    domain: str,
+    root: Path | None = None,
+    *,
+    meshes: dict[str, Any] | None = None,
+    objects: int | None = None,
+) -> System:
+    """Verify `artifacts/<domain>/` against its manifest; the system, ready for a sandbox.
+
+    `meshes` and `objects` (the catalogue's size) default to the registered domain's; given
+    meshes and no `objects`, only the plan's step cap bounds what the programs return."""
     manifest, sources = verify(domain, root)
-    if meshes is None:
-        import domains
+    meshes, objects = _of_domain(domain, meshes, objects)
+    return System(
+        domain=domain, manifest=manifest, sources=dict(sources), meshes=meshes, objects=objects
+    )
 
-        meshes = domains.load(domain).meshes()
-    return System(domain=domain, manifest=manifest, sources=dict(sources), meshes=meshes)
 
-
-def from_folder(domain: str, folder: Path, *, meshes: dict[str, Any] | None = None) -> System:
+def from_folder(
+    domain: str,
+    folder: Path,
+    *,
+    meshes: dict[str, Any] | None = None,
+    objects: int | None = None,
+) -> System:
     """A system from a programs folder (no manifest: e.g. an authoring run's programs)."""
-    if meshes is None:
-        import domains
+    meshes, objects = _of_domain(domain, meshes, objects)
+    return System(
+        domain=domain,
+        manifest={},
+        sources=read_programs(folder),
+        meshes=meshes,
+        objects=objects,
+    )
 
-        meshes = domains.load(domain).meshes()
-    return System(domain=domain, manifest={}, sources=read_programs(folder), meshes=meshes)
+
+def _of_domain(
+    domain: str, meshes: dict[str, Any] | None, objects: int | None
+) -> tuple[dict[str, Any], int | None]:
+    if meshes is not None:
+        return meshes, objects
+    import domains
+
+    dom = domains.load(domain)
+    return dom.meshes(), len(dom.objects) if objects is None else objects

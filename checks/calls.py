@@ -6,14 +6,23 @@ this side). Each call runs under the function's per-call budget, enforced by the
 outside the draft's process; the time it took is measured there too. After a call that timed
 out or killed the draft's process, every later call fails at once ("closed"), so a draft that
 never returns cannot hold a check for calls × budget seconds.
+
+What a call returns is counted before any check reads it (`contracts.limits.count_problem`:
+records within the catalogue, edges within what the objects allow, plan steps within the
+contract's cap): a value over a limit comes back as a ``bad_output`` verdict naming the count
+and the limit, so no suite's geometry or comparison ever grows with a draft's answer. Decoding
+such an answer still costs the host seconds (up to the sandbox's wire limits), so after one,
+later calls of the function are not made ("refused"), as after a timeout: a draft that floods
+cannot hold a check for calls × decoding seconds either.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
+from contracts.limits import clip, count_problem
 from sandbox import CallReport, ExceptionInfo, Session
 
 # What a call's verdict means, in the words the report uses.
@@ -21,8 +30,9 @@ _VERDICT_TEXT = {
     "timeout": "did not return within its {budget:g} s budget",
     "oom": "ran out of memory",
     "crashed": "killed its own process ({detail})",
-    "bad_output": "returned a value that cannot be read ({detail})",
+    "bad_output": "returned a value that cannot be used ({detail})",
     "closed": "was not run: the draft's process had already ended ({detail})",
+    "refused": "was not run: an earlier call returned more than the contract allows ({detail})",
 }
 
 
@@ -37,6 +47,7 @@ class CallResult:
     seconds: float = 0.0
     cpu_seconds: float = 0.0
     budget: float = 0.0
+    over_limit: bool = False  # bad_output because a count is over its limit (`bounded`)
 
     @property
     def ok(self) -> bool:
@@ -53,10 +64,20 @@ class CallResult:
     def describe(self) -> str:
         """One line: the exception type and message, or what else became of the call."""
         if self.verdict == "exception" and self.exception is not None:
-            return f"raised {self.exception.type}: {self.exception.message[:500]}"
+            return f"raised {clip(self.exception.type, 100)}: {clip(self.exception.message)}"
         if self.verdict in _VERDICT_TEXT:
-            return _VERDICT_TEXT[self.verdict].format(budget=self.budget, detail=self.detail[:300])
+            return _VERDICT_TEXT[self.verdict].format(budget=self.budget, detail=clip(self.detail))
         return "returned"
+
+    def bounded(self, function: str, objects: int | None) -> CallResult:
+        """This result, or a ``bad_output`` one when its value is over a count limit of
+        `function`'s output (`contracts.limits`; `objects`: the catalogue's size)."""
+        if not self.ok:
+            return self
+        problem = count_problem(function, self.value, objects=objects)
+        if problem is None:
+            return self
+        return replace(self, value=None, verdict="bad_output", detail=problem, over_limit=True)
 
     @staticmethod
     def of(report: CallReport, budget: float) -> CallResult:
@@ -79,26 +100,36 @@ class DraftCalls:
         session: the sandbox session holding the program.
         module: the module whose function is judged (e.g. "plan").
         budget: per-call budget of that function [s].
+        objects: the domain's catalogue size, which bounds what the function may return
+            (None: only the plan's step cap applies).
         calls: how many calls were made.
         seconds: (label, CPU seconds) of every call of the judged function that returned: the
             time it needs on one core, whatever else the machine is doing.
         failures: (label, CallResult) of calls that timed out or ended the process.
+        flooded: the first answer of the judged function over a count limit (later calls of
+            it are refused without being made), or None.
     """
 
     session: Session
     module: str
     budget: float
+    objects: int | None = None
     calls: int = 0
     seconds: list[tuple[str, float]] = field(default_factory=list)
     failures: list[tuple[str, CallResult]] = field(default_factory=list)
+    flooded: CallResult | None = None
 
     def __call__(self, *args: Any, label: str = "", function: str | None = None) -> CallResult:
         """Call ``module.function(*args)`` (the judged function by default)."""
         name = function or self.module
+        if name == self.module and self.flooded is not None:
+            return replace(self.flooded, verdict="refused", seconds=0.0, cpu_seconds=0.0)
         self.calls += 1
         result = CallResult.of(
             self.session.call(self.module, name, *args, timeout_s=self.budget), self.budget
-        )
+        ).bounded(name, self.objects)
+        if name == self.module and result.over_limit:
+            self.flooded = result
         if name == self.module and result.verdict in ("ok", "exception"):
             self.seconds.append((label, result.cpu_seconds))
         if result.verdict in ("timeout", "oom", "crashed"):

@@ -17,6 +17,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from contracts.limits import clip
+
 
 class RivetError(Exception):
     """Root of every error RIVET raises on purpose."""
@@ -33,15 +35,17 @@ class ContractError(RivetError):
     Attributes:
         path: JSON path of the offending value, e.g. ``objects[2].pose`` ("" for the root).
         problem: what was expected, e.g. ``rotation is not proper (det = -1.000)``.
+        Both are cut to `contracts.limits.CLIP_CHARS` characters (they may quote the value).
     """
 
     def __init__(self, path: str, problem: str, *, kind: str | None = None) -> None:
-        self.path = path
-        self.problem = problem
+        # both may quote the value (a key, a repr): a program's answer can be megabytes
+        self.path = clip(path)
+        self.problem = clip(problem)
         self.kind = kind
-        where = path if path else "(root)"
+        where = self.path if self.path else "(root)"
         prefix = f"{kind}: " if kind else ""
-        super().__init__(f"{prefix}{where}: {problem}")
+        super().__init__(f"{prefix}{where}: {self.problem}")
 
 
 class InvalidInputError(ContractError, UsageError):

@@ -23,6 +23,7 @@ from referencing import Registry, Resource
 
 from contracts import se3
 from contracts.errors import ContractError
+from contracts.limits import plan_problem
 
 SCHEMA_NAMES = (
     "camera",
@@ -99,6 +100,9 @@ def validate(kind: str, value: Any) -> Any:
     """
     if kind not in SCHEMA_NAMES:
         raise ContractError("", f"unknown contract '{kind}'; known: {', '.join(SCHEMA_NAMES)}")
+    if kind == "plan" and (problem := plan_problem(value)):
+        # before the schema, which would build a repr of every step to say "is too long"
+        raise ContractError("steps", problem, kind=kind)
     data = to_jsonable(value)
     _check_finite(data, (), kind)
     errors = list(_validator(kind).iter_errors(data))
@@ -124,8 +128,9 @@ def _describe(error: ValidationError) -> str:
     if error.validator == "additionalProperties":
         return error.message.replace("Additional properties are not allowed", "unknown field")
     if error.validator in ("minItems", "maxItems") and isinstance(error.instance, list):
-        return f"{error.message} (has {len(error.instance)} items)"
-    return error.message
+        most = "most" if error.validator == "maxItems" else "least"
+        return f"has {len(error.instance)} items, where at {most} {error.validator_value} belong"
+    return error.message  # (cut by ContractError: it may quote the whole value)
 
 
 # --- what JSON Schema cannot say -----------------------------------------------------------

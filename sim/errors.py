@@ -43,6 +43,7 @@ FailureKind = Literal[
     "unreachable",  # no IK solution for a waypoint of the transfer
     "grasp_failed",  # the fingers closed but the object is not held
     "dropped",  # the object left the hand during the transfer
+    "deadline",  # the wall-clock deadline passed before the plan was done
 ]
 
 FAILURE_KINDS: tuple[str, ...] = FailureKind.__args__  # type: ignore[attr-defined]

@@ -15,6 +15,10 @@ safe height → descend → open → retreat, planned kinematically first (so an
 fails before the arm moves) and then run in physics with joint position control at
 `control_dt`. Grasping is by friction; the optional weld assist (`sim.weld`, off by default)
 is a physics aid. See docs/executor.md.
+
+`execute` takes a wall-clock deadline: no transfer and no phase of one starts after it, so a
+long plan (or a slow machine) ends the plan with a ``deadline`` failure instead of holding its
+caller; the arm is still parked.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import trimesh
 
 from contracts import se3
 from contracts.errors import UsageError
+from contracts.limits import clip
 from geometry.hand import Grasp
 from sim import robot
 from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments
@@ -122,6 +127,7 @@ class Executor:
         self._tracker = _Tracker()
         self._next_frame = data.time
         self._frames = 0
+        self._deadline: float | None = None
 
     @property
     def weld_assist(self) -> bool:
@@ -129,17 +135,25 @@ class Executor:
 
     # -- public -----------------------------------------------------------------------------
 
-    def execute(self, plan: Any) -> ExecutionResult:
-        """Run `plan` ({"status": "ok", "steps": [...]} or a list of steps)."""
+    def execute(self, plan: Any, *, deadline: float | None = None) -> ExecutionResult:
+        """Run `plan` ({"status": "ok", "steps": [...]} or a list of steps).
+
+        Args:
+            deadline: a `time.perf_counter()` value [s] after which no transfer or phase of
+                one starts (the step then fails with kind ``deadline``); None: none.
+        """
         steps = _plan_steps(plan)
         wall0, sim0 = time.perf_counter(), self.data.time
+        self._deadline = deadline
         outcomes: list[StepOutcome] = []
         failure: StepFailure | None = None
         targets: list[np.ndarray] = []
         for i, (oid, raw) in enumerate(steps):
             failure = self._validate(i, oid, raw)
             if failure is not None:
-                outcomes.append(StepOutcome(index=i, object=oid, ok=False, failure=failure))
+                outcomes.append(
+                    StepOutcome(index=i, object=failure.object, ok=False, failure=failure)
+                )
                 break
             targets.append(_orthonormalize(se3.as_matrix(raw)))
         if failure is None:
@@ -167,10 +181,10 @@ class Executor:
             known = ", ".join(sorted(self.meshes)) or "(none)"
             return StepFailure(
                 step=i,
-                object=str(oid),
+                object=clip(str(oid), 128),
                 kind="unknown_object",
                 phase="validate",
-                reason=f"unknown object id {oid!r}; known: {known}",
+                reason=f"unknown object id {clip(repr(oid))}; known: {known}",
             )
         try:
             T = se3.as_matrix(raw)
@@ -180,7 +194,7 @@ class Executor:
                 object=oid,
                 kind="non_rigid_target",
                 phase="validate",
-                reason=f"target_pose is not a 4x4 matrix: {exc}",
+                reason=f"target_pose is not a 4x4 matrix: {clip(str(exc))}",
             )
         if not se3.is_rigid(T, tol=1e-3):
             ortho, det = se3.rotation_defect(T[:3, :3]) if np.all(np.isfinite(T)) else (np.nan,) * 2
@@ -202,6 +216,7 @@ class Executor:
         grasp: Grasp | None = None
         weld = self.sensors.weld
         try:
+            self._check_deadline("grasp")
             self._unpark()
             self._mark("grasp")
             if self.config.track_objects and self.sensors.tracker is not None:
@@ -378,9 +393,16 @@ class Executor:
     def _mark(self, phase: str) -> None:
         self._tracker.phases.append((phase, float(self.data.time)))
 
-    def _run_phase(self, phase: str, planned: Sequence[PlannedSegment]) -> None:
+    def _run_phase(self, phase: Phase, planned: Sequence[PlannedSegment]) -> None:
+        self._check_deadline(phase)
         self._mark(phase)
         self._run(planned)
+
+    def _check_deadline(self, phase: Phase) -> None:
+        if self._deadline is not None and time.perf_counter() > self._deadline:
+            raise _StepAbort(
+                "deadline", phase, f"the wall-clock deadline passed before the {phase} phase"
+            )
 
     def _run(self, planned: Sequence[PlannedSegment]) -> None:
         m, d = self.model, self.data
@@ -489,5 +511,5 @@ def _plan_steps(plan: Any) -> list[tuple[str, Any]]:
         elif hasattr(s, "object") and hasattr(s, "target_pose"):
             out.append((str(s.object), s.target_pose))
         else:
-            raise UsageError(f"plan step {k} is not a step: {s!r}")
+            raise UsageError(f"plan step {k} is not a step: {clip(repr(s))}")
     return out

@@ -12,6 +12,11 @@ perceived start state as its belief, and senses what `Protocol` switches on. The
 ground truth is read only to render the observations and to score. The oracle policy is the
 exception by definition: ground-truth states and the reference construction order, so it
 measures the executor alone.
+
+What the policy hands over is bounded before anything works on it: a plan over the plan
+contract's step cap (`contracts.limits`) is refused unexecuted, and every trial has a
+wall-clock deadline (`TRIAL_DEADLINE_S`): the executor starts no phase of a transfer after it,
+and the trial ends failed, saying so.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ import mujoco
 import numpy as np
 
 from contracts import ContractError, se3, to_jsonable, validate
+from contracts.limits import clip, count_problem, plan_problem
 from domains import Domain
 from domains.instance import Instance
 from sim import robot
@@ -40,6 +46,7 @@ from sim.sensing import EXACT, WRIST_CAMERA, Sensors
 from sim.settle import check_order
 
 Stage = Literal["perception", "relations", "planning", "grasp", "motion", "execution", "harness"]
+TRIAL_DEADLINE_S = 600.0  # [s] wall clock, one trial: 50× the slowest domain's median (11 s)
 # which stage an executor failure belongs to
 _STAGE_OF_KIND: dict[str, Stage] = {
     "unknown_object": "planning",
@@ -49,6 +56,13 @@ _STAGE_OF_KIND: dict[str, Stage] = {
     "grasp_failed": "grasp",
     "unreachable": "motion",
     "dropped": "execution",
+    "deadline": "execution",
+}
+# which stage a policy's failing program belongs to (its exception's `function`, where it has one)
+_STAGE_OF_FUNCTION: dict[str, Stage] = {
+    "perceive": "perception",
+    "relate": "relations",
+    "plan": "planning",
 }
 
 
@@ -248,12 +262,15 @@ def run_trial(
     protocol: Protocol = HONEST,
     record_dir: Path | None = None,
     config: ExecutorConfig | None = None,
+    deadline_s: float = TRIAL_DEADLINE_S,
 ) -> TrialResult:
     """Run one trial end to end; see the module docstring. `camera`: a view name or a camera
-    dict (the true camera; the policy gets it calibrated)."""
+    dict (the true camera; the policy gets it calibrated). `deadline_s`: the trial's wall-clock
+    deadline [s], counted from its start."""
     timings: dict[str, float] = {}
     failure: tuple[Stage, str] | None = None
     t0 = time.perf_counter()
+    deadline = t0 + deadline_s
     start_obs, goal_obs = observations(domain, instance, camera, protocol)
     timings["observe"] = time.perf_counter() - t0
     if record_dir is not None:
@@ -274,8 +291,8 @@ def run_trial(
             plan_ok=False,
             final_ok=False,
             failure={
-                "stage": "perception",
-                "reason": f"policy raised {type(e).__name__}: {e}",
+                "stage": _STAGE_OF_FUNCTION.get(str(getattr(e, "function", "")), "perception"),
+                "reason": f"policy raised {type(e).__name__}: {clip(str(e))}",
                 "traceback": traceback.format_exc(limit=-3),
             },
             timings={**timings, "policy": time.perf_counter() - t},
@@ -284,6 +301,17 @@ def run_trial(
         )
     timings["policy"] = time.perf_counter() - t
     timings.update({f"policy_{k}": v for k, v in out.timings.items()})
+    if bad_state := _states_problem(domain, out):  # before scoring: its geometry is pairwise
+        return TrialResult(
+            name=instance.name,
+            state_ok=False,
+            plan_ok=False,
+            final_ok=False,
+            failure={"stage": bad_state[0], "reason": bad_state[1]},
+            timings={**timings, "total": time.perf_counter() - t0},
+            steps=[],
+            object_errors=[],
+        )
 
     # -- state accuracy -----------------------------------------------------------------------
     state_ok = True
@@ -300,19 +328,24 @@ def run_trial(
     plan_ok = False
     plan_failure: str | None = None
     steps: list[dict] = []
-    raw = to_jsonable(out.plan)
     valid = False
-    try:
-        plan = validate("plan", raw)
-        valid = True
-    except ContractError as e:
+    if too_long := plan_problem(out.plan):  # before any work on it: listing it costs too
         plan = None
-        plan_failure = f"plan is malformed: {e}"
+        plan_failure = f"plan refused unexecuted: {too_long}"
         failure = failure or ("planning", plan_failure)
-        if _executable_shape(raw):
-            plan = raw  # let the executor refuse it step by step, naming the step
+    else:
+        raw = to_jsonable(out.plan)
+        try:
+            plan = validate("plan", raw)
+            valid = True
+        except ContractError as e:
+            plan = None
+            plan_failure = f"plan is malformed: {e}"
+            failure = failure or ("planning", plan_failure)
+            if _executable_shape(raw):
+                plan = raw  # let the executor refuse it step by step, naming the step
     if plan is not None and plan["status"] != "ok":
-        plan_failure = f"plan says infeasible: {plan['reason']}"
+        plan_failure = f"plan says infeasible: {clip(str(plan['reason']))}"
         failure = failure or ("planning", plan_failure)
     elif valid and plan is not None:
         steps = plan["steps"]
@@ -354,7 +387,7 @@ def run_trial(
         executor = Executor(
             model, data, meshes, belief=belief, sensors=sensors, record=recorder, config=exec_config
         )
-        result = executor.execute(plan)
+        result = executor.execute(plan, deadline=deadline)
         timings["execute_wall"] = result.wall_time
         timings["execute_sim"] = result.sim_time
         step_info = [s.to_dict() for s in result.steps]
@@ -363,7 +396,10 @@ def run_trial(
             execution_failure = result.failure.to_dict()
             failure = failure or (
                 _STAGE_OF_KIND.get(f.kind, "execution"),
-                f"step {f.step} ({f.object}, {f.phase}): {f.kind}: {f.reason}",
+                f"the trial ran past its {deadline_s:g} s wall-clock deadline: step {f.step} "
+                f"({f.object}) stopped before its {f.phase} phase, later steps not run"
+                if f.kind == "deadline"
+                else f"step {f.step} ({f.object}, {f.phase}): {f.kind}: {clip(f.reason)}",
             )
         final = _final_scene(domain, instance, model, data)
         score = final_success(
@@ -407,6 +443,19 @@ def run_trial(
         execution_failure=execution_failure,
         plan_failure=plan_failure,
     )
+
+
+def _states_problem(domain: Domain, out: PolicyOutput) -> tuple[Stage, str] | None:
+    """The first perceived state over a count limit (`contracts.limits`), as a failure."""
+    objects = len(domain.objects)
+    for side, state in (("start", out.start_state), ("goal", out.goal_state)):
+        if not isinstance(state, Mapping):
+            continue
+        if problem := count_problem("perceive", state.get("objects"), objects=objects):
+            return "perception", f"{side}: the perceived records are refused: {problem}"
+        if problem := count_problem("relate", state.get("relations"), objects=objects):
+            return "relations", f"{side}: the relation graph is refused: {problem}"
+    return None
 
 
 def _executable_shape(plan: Any) -> bool:
