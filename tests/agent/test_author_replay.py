@@ -37,6 +37,10 @@ def _transcript_domains() -> list[str]:
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.parametrize("domain", _transcript_domains())
+def _events(run_dir: Path) -> list[dict]:
+    return [json.loads(line) for line in (run_dir / "journal.jsonl").read_text().splitlines()]
+
+
 def test_replayed_authoring_reproduces_the_committed_artifacts(tmp_path, domain):
     committed = json.loads((REPO / "artifacts" / domain / "manifest.json").read_text())
     proc = subprocess.run(
@@ -49,10 +53,12 @@ def test_replayed_authoring_reproduces_the_committed_artifacts(tmp_path, domain)
             str(tmp_path / "runs"),
             "--artifacts",
             str(tmp_path / "art"),
+            "--gate-trials",
+            "2",  # the gate in the real path, kept short (docs/results.md has the full gate)
         ],
         capture_output=True,
         text=True,
-        timeout=900,
+        timeout=1800,
         cwd=REPO,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -65,6 +71,8 @@ def test_replayed_authoring_reproduces_the_committed_artifacts(tmp_path, domain)
     assert "failed:" in proc.stderr  # a draft was rejected by the checks, then repaired
     (run_dir,) = list((tmp_path / "runs" / domain).iterdir())
     assert (run_dir / "report.html").is_file()
+    gates = [e for e in _events(run_dir) if e["event"] == "gate"]
+    assert [g["passed"] for g in gates] == [True] and len(gates[0]["trials"]) == 2
 
 
 # The committed reference transcripts still answer today's prompts.

@@ -55,6 +55,8 @@ def author(tmp_path: Path, *args: str) -> int:
             str(tmp_path / "runs"),
             "--artifacts",
             str(tmp_path / "art"),
+            "--gate-trials",
+            "0",  # the toy programs solve no real task: these tests are about the clients
             *args,
         ]
     )
