@@ -15,6 +15,19 @@ import pytest
 from contracts.functions import CODE_DEPS, authoring_order
 
 
+PLUGIN_SEED = 1  # the default case seed: a CI run checks what the last one checked
+
+
+def _seed(config: pytest.Config) -> int | None:
+    text = config.getoption("--rivet-seed")
+    if text == "fresh":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        raise pytest.UsageError(f"--rivet-seed {text}: an integer or 'fresh'") from None
+
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("rivet")
     group.addoption(
@@ -22,6 +35,13 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         metavar="DIR",
         default=None,
         help="check the frozen programs under DIR/<domain>/ (hashes and full check suites)",
+    )
+    group.addoption(
+        "--rivet-seed",
+        metavar="S|fresh",
+        default=str(PLUGIN_SEED),
+        help=f"the seed the check cases are drawn from (default {PLUGIN_SEED}, so that CI "
+        "repeats; 'fresh' draws new cases each run and prints their seed)",
     )
     group.addoption(
         "--rivet-sandbox",
@@ -105,9 +125,12 @@ class CheckItem(pytest.Item):
             sources[self.program],
             deps=deps,
             executor=self._executors[backend],
+            cases_seed=_seed(self.config),
         )
         if not report["passed"]:
-            raise CheckFailed(report_markdown(report))
+            raise CheckFailed(
+                report_markdown(report) + f"\n\n(cases drawn from seed {report['cases_seed']})"
+            )
 
     def repr_failure(self, excinfo, style=None):
         if isinstance(excinfo.value, CheckFailed):
