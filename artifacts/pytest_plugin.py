@@ -14,7 +14,6 @@ import pytest
 
 from contracts.functions import CODE_DEPS, authoring_order
 
-
 PLUGIN_SEED = 1  # the default case seed: a CI run checks what the last one checked
 
 
