@@ -7,10 +7,14 @@
 - warm overhead: with the harness warm (heavy modules imported), the median round trip of
   `WARM_JOBS` jobs minus the median in-process call of the same function on the same inputs.
 Targets (issue 5): warm overhead <= 50 ms, cold start <= 2 s.
+
+`--against IMAGE` compares the warm overhead with another sandbox image (an earlier commit's
+harness) instead: one warm executor each, jobs interleaved, so that both see the same load.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import statistics
 import sys
@@ -97,8 +101,39 @@ def _warm(image: str) -> dict[str, Any]:
     return out
 
 
-def main() -> int:
+def _against(image: str, other: str, jobs: int) -> dict[str, Any]:
+    """Warm overhead of `image` and `other`, jobs interleaved (ABBA) on two warm executors."""
+    out: dict[str, Any] = {"image": image, "against": other, "jobs": jobs}
+    with DockerExecutor(image=image) as new, DockerExecutor(image=other) as old:
+        new.warm()
+        old.warm()
+        for name, (source, inputs) in CASES.items():
+            job = Job(source=source, function="f", inputs=inputs)
+            trips: dict[str, list[float]] = {"image": [], "against": []}
+            for i in range(jobs):
+                pair = (("image", new), ("against", old))
+                for side, ex in pair if i % 2 else pair[::-1]:
+                    t0 = time.perf_counter()
+                    report = ex.run(job)
+                    trips[side].append(time.perf_counter() - t0)
+                    assert report.ok, report
+            local = statistics.median(_in_process(source, inputs, jobs))
+            out[name] = {
+                f"{side}_overhead_median_ms": 1000 * (statistics.median(t) - local)
+                for side, t in trips.items()
+            }
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="benchmarks.sandbox_bench")
+    parser.add_argument("--against", metavar="IMAGE", help="compare with this sandbox image")
+    parser.add_argument("--jobs", type=int, default=200, help="with --against: jobs per side")
+    args = parser.parse_args(argv)
     image = ensure_image(quiet=True)
+    if args.against:
+        print(json.dumps(_against(image, args.against, args.jobs), indent=2))
+        return 0
     cold = _cold(image)
     warm = _warm(image)
     figures = {"image": image, "cold": cold, "warm": warm}

@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from checks.timing import TimingLog
 from contracts.limits import clip, count_problem
 from sandbox import CallReport, ExceptionInfo, Session
 
@@ -46,6 +47,7 @@ class CallResult:
     detail: str = ""
     seconds: float = 0.0
     cpu_seconds: float = 0.0
+    queued_seconds: float = 0.0  # of `seconds`, waiting for a CPU (`sandbox.CallReport`)
     budget: float = 0.0
     over_limit: bool = False  # bad_output because a count is over its limit (`bounded`)
 
@@ -88,6 +90,7 @@ class CallResult:
             detail=report.detail,
             seconds=report.seconds,
             cpu_seconds=report.cpu_seconds,
+            queued_seconds=report.queued_seconds,
             budget=budget,
         )
 
@@ -108,6 +111,8 @@ class DraftCalls:
         failures: (label, CallResult) of calls that timed out or ended the process.
         flooded: the first answer of the judged function over a count limit (later calls of
             it are refused without being made), or None.
+        timings: CPU and wall time of every call of the judged function that returned, each
+            marked first or not on its input (`checks.timing`: what the speed gate counts).
     """
 
     session: Session
@@ -118,6 +123,7 @@ class DraftCalls:
     seconds: list[tuple[str, float]] = field(default_factory=list)
     failures: list[tuple[str, CallResult]] = field(default_factory=list)
     flooded: CallResult | None = None
+    timings: TimingLog = field(default_factory=TimingLog)
 
     def __call__(self, *args: Any, label: str = "", function: str | None = None) -> CallResult:
         """Call ``module.function(*args)`` (the judged function by default)."""
@@ -132,6 +138,8 @@ class DraftCalls:
             self.flooded = result
         if name == self.module and result.verdict in ("ok", "exception"):
             self.seconds.append((label, result.cpu_seconds))
+        if name == self.module:
+            self.timings.record(label, args, result)
         if result.verdict in ("timeout", "oom", "crashed"):
             self.failures.append((label, result))
         return result

@@ -20,6 +20,10 @@ MIN_AREA = 80  # [px] objects the reference shows smaller than this are not scor
 IOU_MIN = 0.6  # per object
 IOU_MEAN_MIN = 0.8  # over the scored objects
 DEPTH_MEDIAN_MAX = 0.006  # [m] per object, on pixels both sides show it
+# [px] the depth error of a scored object is judged on at least this many pixels both sides
+# show it with depth, else it fails: a render that draws its silhouettes without depth leaves
+# nothing to judge. A scored object that keeps IOU_MIN shares 0.6 × MIN_AREA = 48 px or more.
+DEPTH_MIN_PX = 20
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -31,6 +35,7 @@ class ObjectMatch:
     area_candidate: int  # [px]
     area_reference: int  # [px]
     depth_error_median: float | None  # [m]
+    depth_pixels: int = 0  # [px] where both show it with depth: what the depth error is over
 
     def to_dict(self) -> dict:
         return {
@@ -77,6 +82,7 @@ def compare(
                 depth_error_median=float(np.median(np.abs(cd[both] - rd[both])))
                 if both.any()
                 else None,
+                depth_pixels=int(both.sum()),
             )
         )
     return out
@@ -89,8 +95,15 @@ def judge(
     iou_min: float = IOU_MIN,
     iou_mean_min: float = IOU_MEAN_MIN,
     depth_max: float = DEPTH_MEDIAN_MAX,
+    depth_min_px: int = 0,
 ) -> list[str]:
-    """What is wrong with a set of matches ([] when they pass), worst first."""
+    """What is wrong with a set of matches ([] when they pass), worst first.
+
+    Args:
+        depth_min_px: a scored object whose silhouette passes but whose depth error is over
+            fewer pixels than this fails (`DEPTH_MIN_PX` where the candidate's depth is the
+            draft's own output; 0: not required).
+    """
     scored = [m for m in matches if m.area_reference >= min_area]
     problems = []
     for m in sorted(scored, key=lambda m: m.iou):
@@ -100,6 +113,11 @@ def judge(
                 f"{m.area_reference} px in the reference)"
             )
     for m in scored:
+        if m.iou >= iou_min and m.depth_pixels < depth_min_px:
+            problems.append(
+                f"'{m.id}': depth compared on only {m.depth_pixels} px where both show it (at "
+                f"least {depth_min_px} needed): its pixels have no depth"
+            )
         if m.depth_error_median is not None and m.depth_error_median > depth_max:
             problems.append(
                 f"'{m.id}': median depth error {1000 * m.depth_error_median:.1f} mm > "

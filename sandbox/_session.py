@@ -285,6 +285,7 @@ class HarnessExecutor(Executor):
             "detail": _text(head.get("detail")),
             "seconds": _num(head.get("seconds")) or 0.0,
             "cpu_seconds": _num(head.get("cpu_seconds")) or 0.0,
+            "queued_seconds": _num(head.get("queued_seconds")) or 0.0,
             "exit_code": _int(head.get("exit_code")),
             "signal": _int(head.get("signal")),
         }

@@ -222,6 +222,11 @@ class CallReport:
         seconds: from request to answer, measured outside the program's process [s].
         cpu_seconds: CPU time the program used meanwhile (all its processes and threads in
             the Docker backend), measured outside its process [s]; robust to a busy machine.
+        queued_seconds: of `seconds`, the longest any one thread of the program's process
+            waited, runnable, for a CPU (its run-queue delay, measured outside the process),
+            plus the harness's own wait while relaying the call [s]: about what a busy
+            machine added (threads that ended and other processes are not looked at, so
+            ``seconds - queued_seconds`` errs towards slower).
     """
 
     verdict: Literal["ok", "exception", "timeout", "oom", "crashed", "bad_output", "closed"]
@@ -230,6 +235,7 @@ class CallReport:
     detail: str = ""
     seconds: float = 0.0
     cpu_seconds: float = 0.0
+    queued_seconds: float = 0.0
     exit_code: int | None = None
     signal: int | None = None
 

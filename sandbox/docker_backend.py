@@ -7,7 +7,8 @@ file system, size-capped tmpfs /tmp (noexec) and /dev/shm, uid 10001, every capa
 no-new-privileges, the project's own seccomp profile (`sandbox.seccomp`: Docker's denials and
 more — io_uring, System V and POSIX IPC, sockets other than unix/inet/inet6, namespaces),
 pids/memory (swap = memory)/CPU limits, no host environment variables, a private IPC namespace,
-no core dumps, no logging of the channel. Containers
+no core dumps, no logging of the channel, the cgroup's high-water marks and limit-hit counts
+masked (`MASKED_PATHS`: they would carry what one job used to the next). Containers
 carry the label ``rivet.sandbox=1`` and their owner; leftovers whose owner is gone are reaped
 whenever an executor starts.
 
@@ -36,6 +37,35 @@ from sandbox.image import LABEL, docker_client, has_image, image_tag
 
 _MUX = struct.Struct(">BxxxI")  # Docker's attach stream header: stream id, payload size
 HARNESS_MB = 1024  # [MiB] kept for the warm harness (about 400 MiB resident) and the job's slack
+# A container's masked paths replace the engine's default list, so that list comes first
+# (Docker 20.10-27's, the last entry from 25 on). Then the cgroup files (v1 and v2) that hold a
+# high-water mark or a count of limit hits over the container's life: a job could read there
+# what an earlier job used (a few bits a job, from one to the next). Masked, each reads as
+# empty (/dev/null bound over it); the harness reads none of them (it reads `memory.stat`,
+# `cpu.stat` / `cpuacct.usage` and the OOM-kill count; docs/sandbox.md lists what those carry).
+MASKED_PATHS = (
+    "/proc/asound",
+    "/proc/acpi",
+    "/proc/kcore",
+    "/proc/keys",
+    "/proc/latency_stats",
+    "/proc/timer_list",
+    "/proc/timer_stats",
+    "/proc/sched_debug",
+    "/proc/scsi",
+    "/sys/firmware",
+    "/sys/devices/virtual/powercap",
+    *(
+        f"/sys/fs/cgroup/memory/memory.{kind}{what}"
+        for kind in ("", "memsw.", "kmem.", "kmem.tcp.")
+        for what in ("max_usage_in_bytes", "failcnt")
+    ),
+    "/sys/fs/cgroup/pids/pids.events",
+    "/sys/fs/cgroup/memory.peak",
+    "/sys/fs/cgroup/memory.swap.peak",
+    "/sys/fs/cgroup/pids.peak",
+    "/sys/fs/cgroup/pids.events",
+)
 
 
 class _AttachChannel(Channel):
@@ -173,7 +203,7 @@ class DockerExecutor(HarnessExecutor):
         import docker
 
         try:
-            self.container = self.client.containers.create(self.image, **self.container_options())
+            self.container = self._create()
             sock = self.container.attach_socket(
                 params={"stdin": 1, "stdout": 1, "stderr": 1, "stream": 1}
             )
@@ -184,6 +214,26 @@ class DockerExecutor(HarnessExecutor):
                 f"cannot start a sandbox container from {self.image}: {e}"
             ) from None
         return _AttachChannel(sock)
+
+    def _create(self) -> Any:
+        """`containers.create` with the masked paths added (the client library has no option
+        for them; the engine's API has since 1.39): the same steps the library takes."""
+        try:
+            from docker.models.containers import _create_container_args
+        except ImportError as e:  # a docker SDK that changed its insides
+            raise SandboxUnavailable(
+                f"this docker SDK cannot create the sandbox container ({e}); install the "
+                "version uv.lock pins (uv sync)"
+            ) from None
+        kwargs = {
+            **self.container_options(),
+            "image": self.image,
+            "version": self.client.api.api_version,
+        }
+        create = _create_container_args(kwargs)
+        create["host_config"]["MaskedPaths"] = list(MASKED_PATHS)
+        made = self.client.api.create_container(**create)
+        return self.client.containers.get(made["Id"])
 
     def _harness_path(self, staged: Path) -> str:
         return f"/in/{staged.name}"

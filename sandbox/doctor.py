@@ -5,8 +5,11 @@ sent as an ordinary draft) tries each escape from where a draft runs; then real 
 the limits bite (a sleeper and a spinner that ignores its alarm are killed from outside, a
 memory bomb is stopped, a job that tries to lower its OOM preference and holds memory in a
 memfd still cannot take the harness down, a thread bomb hits the pids limit, an oversized output is refused, a fake secret set on
-the host is not visible) and that two jobs share nothing (scratch files however deep or
-locked, processes). The container's configuration is listed beside them for reference.
+the host is not visible, shared memory counts against a job's memory limit) and that two
+jobs share nothing (scratch files however deep or locked, processes, the memory high-water
+mark). Where the sandbox knowingly does not isolate something (the process-id counter, see
+docs/sandbox.md), the item measures it and says KNOWN rather than PASS. The container's
+configuration is listed beside them for reference.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ class Item:
     name: str
     ok: bool
     detail: str
+    known: bool = False  # a documented limit (docs/sandbox.md), measured: never a failure
 
 
 def run_doctor(executor: DockerExecutor | None = None) -> list[Item]:
@@ -78,7 +82,10 @@ def _checks(ex: DockerExecutor, canary: str) -> list[Item]:
         )
     items += [_enforced(ex, name, job, want, check) for name, job, want, check in _LIMIT_JOBS]
     items.append(_harness_kept(ex))
+    items.append(_shared_memory_counted(ex))
     items.append(_nothing_shared(ex))
+    items.append(_high_water_hidden(ex))
+    items.append(_pid_counter(ex))
     items.append(_memory_fresh(ex))
     items.append(_next_job_works(ex))
     items += _config(ex)
@@ -107,6 +114,139 @@ def _harness_kept(ex: DockerExecutor) -> Item:
         ok=report.verdict in ("oom", "crashed") and kept,
         detail=f"job {report.verdict} ({report.detail[:80]}); harness restarts "
         f"{ex.restarts - before}; next job {after.verdict}",
+    )
+
+
+SHARED_FILL_MB = 1536  # [MiB] what each shared-memory job tries to hold
+SHARED_LIMIT_MB = 128  # [MiB] the memory limit it asks for
+
+# Shared memory a job holds by three routes; RLIMIT_DATA counts none of them.
+_SHARED_FILL = """
+import mmap, os
+def f(route, mb):
+    chunk = b"\\1" * (1 << 20)
+    if route == "shared map":
+        m = mmap.mmap(-1, mb << 20, flags=mmap.MAP_SHARED)
+        for i in range(0, mb << 20, 4096):
+            m[i] = 1
+    elif route == "memfd":
+        fd = os.memfd_create("hold")
+        for _ in range(mb):
+            os.write(fd, chunk)
+    else:
+        with open("/dev/shm/hold", "wb") as fh:
+            for _ in range(mb):
+                fh.write(chunk)
+    return "held"
+"""
+
+
+def _shared_memory_counted(ex: DockerExecutor) -> Item:
+    """Jobs with a small memory limit try to hold more shared memory than that (a shared
+    anonymous map, a memfd, a file in /dev/shm; less than the container's limit, so that only
+    the job's own limit can stop them): each must end as ``oom`` (the harness's memory watch),
+    the /dev/shm one may instead fail on the tmpfs's size, and the harness stays."""
+    before = ex.restarts
+    seen, ok = [], True
+    for route in ("shared map", "memfd", "/dev/shm"):
+        report = ex.run(
+            Job(
+                source=_SHARED_FILL,
+                function="f",
+                inputs={"route": route, "mb": SHARED_FILL_MB},
+                memory_mb=SHARED_LIMIT_MB,
+                timeout_s=60,
+            )
+        )
+        stopped = report.verdict == "oom" or (
+            route == "/dev/shm" and report.verdict == "exception" and "space" in report.detail
+        )
+        ok = ok and stopped
+        seen.append(f"{route}: {report.verdict} ({report.detail[:70]})")
+    return Item(
+        name=f"a job's memory limit counts shared memory ({SHARED_FILL_MB} MiB under "
+        f"{SHARED_LIMIT_MB} MiB)",
+        ok=ok and ex.restarts == before,
+        detail="; ".join(seen) + f"; harness restarts {ex.restarts - before}",
+    )
+
+
+# Every cgroup file (v1 and v2) that keeps a high-water mark or a count of limit hits.
+_HIGH_WATER_READ = """
+import glob
+def f():
+    out = {}
+    for pattern in ("/sys/fs/cgroup/memory/memory*max_usage_in_bytes",
+                    "/sys/fs/cgroup/memory/memory*failcnt", "/sys/fs/cgroup/memory.peak",
+                    "/sys/fs/cgroup/memory.swap.peak", "/sys/fs/cgroup/pids.peak",
+                    "/sys/fs/cgroup/pids/pids.events", "/sys/fs/cgroup/pids.events"):
+        for path in glob.glob(pattern):
+            try:
+                with open(path) as fh:
+                    out[path] = fh.read().strip()
+            except OSError as e:
+                out[path] = f"unreadable: {e.strerror}"
+    return out
+"""
+
+
+def _high_water_hidden(ex: DockerExecutor) -> Item:
+    """A job holds 512 MiB; the next job reads every high-water mark and limit-hit count of the
+    container's cgroup: none may show a value (masked: they read as empty)."""
+    big = ex.run(
+        Job(
+            source="def f():\n    b = bytearray(512 << 20)\n    return len(b)\n",
+            function="f",
+            memory_mb=1024,
+        )
+    )
+    read = ex.run(Job(source=_HIGH_WATER_READ, function="f", timeout_s=30))
+    values = read.output if read.ok and isinstance(read.output, dict) else {}
+    shown = {k: v for k, v in values.items() if v and not v.startswith("unreadable")}
+    return Item(
+        name="the memory high-water mark does not carry from job to job",
+        ok=big.ok and read.ok and bool(values) and not shown,
+        detail=f"{len(values)} files ({', '.join(sorted(p.rsplit('/', 1)[1] for p in values))})"
+        + (f", values shown: {shown}" if shown else ", all empty or unreadable")
+        + ("" if read.ok else f"; the reader {read.verdict}: {read.detail[:80]}"),
+    )
+
+
+_FORKS = """
+import os
+def f(n):
+    last = 0
+    for _ in range(n):
+        pid = os.fork()
+        if pid == 0:
+            os._exit(0)
+        os.waitpid(pid, 0)
+        last = pid
+    return {"pid": os.getpid(), "last": last}
+"""
+PID_FORKS = 300
+
+
+def _pid_counter(ex: DockerExecutor) -> Item:
+    """A job starts and ends `PID_FORKS` processes; the next job's process id shows whether
+    the counter carried over (a fresh PID namespace per session would hide it: docs/sandbox.md
+    says why there is none)."""
+    a = ex.run(Job(source=_FORKS, function="f", inputs={"n": PID_FORKS}, timeout_s=60))
+    b = ex.run(Job(source=_FORKS, function="f", inputs={"n": 0}, timeout_s=30))
+    if not (a.ok and b.ok):
+        return Item(
+            name="process-id counter",
+            ok=False,
+            detail=f"jobs {a.verdict}/{b.verdict}: {a.detail[:60]} {b.detail[:60]}",
+        )
+    carried = b.output["pid"] > a.output["last"]
+    return Item(
+        name="process-id counter carries from job to job (not isolated, documented)",
+        ok=True,
+        known=carried,
+        detail=f"a job ended {PID_FORKS} processes (the last pid {a.output['last']}); the next "
+        f"job's pid is {b.output['pid']}"
+        + (": it reveals how many processes came before" if carried else ": fresh"),
     )
 
 
@@ -326,9 +466,16 @@ def _config(ex: DockerExecutor) -> list[Item]:
 
 def format_items(items: list[Item]) -> str:
     width = max(len(i.name) for i in items)
-    lines = [f"{'PASS' if i.ok else 'FAIL'}  {i.name:<{width}}  {i.detail}" for i in items]
+
+    def status(i: Item) -> str:
+        return "FAIL" if not i.ok else "KNOWN" if i.known else "PASS"
+
+    lines = [f"{status(i):<5} {i.name:<{width}}  {i.detail}" for i in items]
     failed = sum(not i.ok for i in items)
+    known = sum(i.ok and i.known for i in items)
     lines.append(
-        f"{len(items) - failed}/{len(items)} items hold" + (f"; {failed} FAIL" if failed else "")
+        f"{len(items) - failed - known}/{len(items)} items hold"
+        + (f"; {known} KNOWN (not isolated, see docs/sandbox.md)" if known else "")
+        + (f"; {failed} FAIL" if failed else "")
     )
     return "\n".join(lines)

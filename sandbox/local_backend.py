@@ -1,22 +1,23 @@
 """The local backend: the same fork-server harness as a plain subprocess. It ISOLATES NOTHING.
 
 What it does NOT isolate — everything the Docker backend exists for: the draft runs as your
-user with your file system (it can read your files and keys and write anywhere you can), your
-network, your processes (it can signal them and read their environment through /proc, the
-caller's included), and no CPU or process-count limits. It gets a scrubbed environment, a
-time budget enforced from the parent, a memory limit (RLIMIT_DATA), orphan cleanup (the
-harness is a child subreaper) and the same output validation. Only ever used when asked for by
-name (``--sandbox local``); it says so on stderr every time it starts.
+user with your file system (it can read your files and keys, and write anywhere you can: the
+project tree included, so that the next `rivet` or `make` runs code it chose), your network,
+your processes (it can signal them and read their environment through /proc), and no CPU,
+process-count or shared-memory limits. It gets a scrubbed environment, a time budget enforced
+from the parent, a memory limit (RLIMIT_DATA: one process's private memory only), orphan
+cleanup (the harness is a child subreaper) and the same output validation: the verdicts are
+honest, the machine is not protected. Only ever used when asked for by name
+(``--sandbox local``); it says so on stderr every time it starts.
 
-One thing it does hide: the caller's own environment and memory, where an API key lives. On
-Linux, starting the backend makes the calling process non-dumpable (``PR_SET_DUMPABLE`` 0), so
-``/proc/<pid>/environ`` and ``/proc/<pid>/mem`` of the rivet process cannot be read by
-processes of the same user; and the harness starts without the capabilities that bypass that
-flag (``CAP_SYS_PTRACE``, and ``CAP_SYS_ADMIN`` / ``CAP_PERFMON``, which grant read access to
-another process's /proc files), dropped from its bounding set before exec: that matters when
-rivet runs as root. Side effects on the rivet process: no core dumps, and
-debuggers or profilers of the same user cannot attach to it. Other processes of yours (the shell
-that exported the key) stay readable: use the docker backend for generated code.
+Credentials: starting the backend makes the calling process non-dumpable on Linux
+(``PR_SET_DUMPABLE`` 0: its ``/proc/<pid>/environ`` and ``mem`` unreadable to processes of the
+same user) and the harness drops the capabilities that bypass that flag before exec; but that
+guards one process, not the user: the parent that started it, its siblings (``rivet eval
+--workers N``'s other workers) and your shells stay readable. So this backend makes no promise
+about keys: the command line refuses ``--sandbox local`` while a model credential is in its
+environment (`rivet.commands._options`), and docs/sandbox.md says what local mode does and
+does not protect.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from sandbox.errors import SandboxUnavailable
 
 WARNING = (
     "rivet sandbox: WARNING: the local backend isolates NOTHING: the draft runs as you, with "
-    "your files, network and processes. Use the docker backend for generated code."
+    "your files (this project's included), network, processes and their environments. Use "
+    "the docker backend for generated code."
 )
 
 

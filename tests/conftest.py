@@ -12,4 +12,7 @@ os.environ.setdefault(
     "MENAGERIE_ROOT", str(Path(__file__).resolve().parents[2] / "shared" / "menagerie")
 )
 os.environ["RIVET_FORBID_MODEL_API"] = "1"
-os.environ.pop("ANTHROPIC_API_KEY", None)  # a developer's real key never reaches a test
+# A developer's real credentials never reach a test (and `--sandbox local` refuses to run
+# beside them: `rivet.commands._options.CREDENTIAL_VARIABLES`).
+for _name in ("ANTHROPIC_API_KEY", "ANTHROPIC_AUTH_TOKEN", "OPENAI_API_KEY"):
+    os.environ.pop(_name, None)

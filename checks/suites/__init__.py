@@ -57,8 +57,12 @@ def interface_rules(function: str) -> tuple[Rule, ...]:
         ),
         Rule(
             check="interface.fast_enough",
-            text="The median CPU time per call, over all the calls the checks make, is at most "
-            f"{{checks.budget:ONLINE_BUDGET[{f}]|s}} on one core (the online budget of `{f}`).",
+            text="Over the calls the checks make on inputs new to your process (a repeated "
+            "input counts once, at its first call), the median CPU time per call is at most "
+            f"{{checks.budget:ONLINE_BUDGET[{f}]|s}} on one core (the online budget of `{f}`) "
+            "and the median wall time, less the time spent waiting for a CPU on a busy "
+            "machine, at most {checks.budget:WALL_FACTOR} times that: time spent sleeping or "
+            "blocked counts.",
         ),
     )
 

@@ -167,7 +167,8 @@ def plan_of(ctx: SuiteContext, x: tuple) -> tuple[Any, Any] | None:
         else:
             s, g, rs, rg, what = v
             start, goal = _state(ctx, s, rs), _state(ctx, g, rg)
-            ctx.cache[key] = (ctx.call(start, goal, MESHES, label=what), v)
+            moved = x[1] == "both_moved"  # a case already sent, moved: not timed
+            ctx.cache[key] = (ctx.call(start, goal, MESHES, label=what, derived=moved), v)
     return ctx.cache[key]
 
 

@@ -60,11 +60,12 @@ RULES: tuple[Rule, ...] = (
 )
 
 
-def relations_of(ctx: SuiteContext, records: list[dict], label: str) -> Any:
-    """relate(records) as a CallResult, cached by label for the checks that share inputs."""
+def relations_of(ctx: SuiteContext, records: list[dict], label: str, derived: bool = False) -> Any:
+    """relate(records) as a CallResult, cached by label for the checks that share inputs
+    (`derived`: a scene already sent, reordered or moved; see `SuiteContext.call`)."""
     key = ("relate", label)
     if key not in ctx.cache:
-        ctx.cache[key] = ctx.call(records, MESHES, label=label)
+        ctx.cache[key] = ctx.call(records, MESHES, label=label, derived=derived)
     return ctx.cache[key]
 
 
@@ -172,7 +173,8 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         recs = scenes[i]["records"]
         order = order_from_keys(keys, len(recs))
         shuffled = permuted(recs, order)
-        a, b = base(i), relations_of(ctx, shuffled, f"scene {scenes[i]['name']} order {order}")
+        a = base(i)
+        b = relations_of(ctx, shuffled, f"scene {scenes[i]['name']} order {order}", derived=True)
         ce = {"scene": scene_spec(domain, shuffled), "order": [recs[k]["id"] for k in order]}
         for res in (a, b):
             if not res.ok:
@@ -206,7 +208,9 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
         recs = scenes[i]["records"]
         moved = translated(recs, dx / 1000, dy / 1000)
         a = base(i)
-        b = relations_of(ctx, moved, f"scene {scenes[i]['name']} moved by ({dx}, {dy}) mm")
+        b = relations_of(
+            ctx, moved, f"scene {scenes[i]['name']} moved by ({dx}, {dy}) mm", derived=True
+        )
         ce = {"scene": scene_spec(domain, moved), "translation_m": [dx / 1000, dy / 1000, 0.0]}
         for res in (a, b):
             if not res.ok:

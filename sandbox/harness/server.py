@@ -6,8 +6,9 @@ forks (a *session*: load once, answer many calls), so no session starts with any
 earlier one in its memory. This process relays requests and answers and alone decides each
 call's verdict
 from what it observes: the time from request to answer (it kills the child when the call's
-budget runs out, whatever the child does with its signals), the exit status, the cgroup's OOM
-counter, the size and shape of the one answer frame per call. It talks to the host over its
+budget runs out, whatever the child does with its signals), the memory the session holds (it
+kills the child when that goes over the job's limit: `MemoryWatch`), the exit status, the
+cgroup's OOM counter, the size and shape of the one answer frame per call. It talks to the host over its
 stdin/stdout with length-prefixed frames (`wire`); the child never holds those descriptors, and
 this process is non-dumpable, so the child cannot open them through /proc, ptrace it or read its
 memory. As PID 1 of its PID namespace it ignores every signal sent from inside the container.
@@ -39,7 +40,15 @@ from typing import Any
 from . import child, wire
 from .template import PRELOAD_SUBMODULES, Template, TemplateGone
 
-__all__ = ["DEFAULT_PRELOAD", "ENV_KEEP", "PRELOAD_SUBMODULES", "Server", "main", "wipe"]
+__all__ = [
+    "DEFAULT_PRELOAD",
+    "ENV_KEEP",
+    "PRELOAD_SUBMODULES",
+    "MemoryWatch",
+    "Server",
+    "main",
+    "wipe",
+]
 
 DEFAULT_PRELOAD = (
     "numpy",
@@ -82,6 +91,7 @@ MAX_CONTROL = 1 << 20  # [bytes] an open/close/status request
 MAX_CALL = 320 << 20  # [bytes] a call request (its arguments)
 READ_CHUNK = 1 << 20  # [bytes]
 WIPE_BUDGET_S = 3.0  # [s] the post-session wipe; a longer one reports the container dirty
+MEMORY_POLL_S = 0.02  # [s] how often a call's loop reads the session's memory (at most)
 _PR_SET_DUMPABLE = 4
 _PR_SET_CHILD_SUBREAPER = 36
 _IPC_RMID = 0
@@ -221,6 +231,7 @@ class Server:
         output_limit = int(req["output_limit"])
         load_timeout = float(req["load_timeout_s"])
         oom_before = _oom_kills()
+        memory = MemoryWatch.start(int(req["memory_mb"])) if self.in_pid1 else None
         t0 = time.monotonic()
         theirs = [pipes["res"][1], pipes["req"][0], pipes["out"][1], pipes["err"][1]]
         try:
@@ -252,6 +263,7 @@ class Server:
             base_rss=int(spawned.get("base_rss", 0)),
             started=t0,
             in_container=self.in_pid1,
+            memory=memory.allowing(int(spawned.get("base_rss", 0)) << 10) if memory else None,
         )
         head, _ = self.session.exchange(None, [], load_timeout, oom_before)
         head.update(kind="opened", id=req.get("id"), load_s=round(time.monotonic() - t0, 6))
@@ -377,6 +389,54 @@ class Server:
         return "; ".join(problems)
 
 
+class MemoryWatch:
+    """What a session holds of the container's memory, against the job's limit.
+
+    `RLIMIT_DATA` (set in the session's process) stops the heap early with a `MemoryError`,
+    but it counts one process's private memory only: not shared memory (shared anonymous
+    maps, memfds, files in the tmpfs /tmp and /dev/shm), nor what processes the session forks
+    allocate each. So PID 1 also reads the container's cgroup — anonymous plus shared memory —
+    while a call runs (every `MEMORY_POLL_S`, and once the answer is in) and kills the session
+    when what it holds goes over its limit. What the session holds is the cgroup's count less
+    what it was when the session opened (the harness and the template, idle meanwhile) and
+    less what PID 1 itself grew by since (the frames it relays). A session's limit is the
+    job's `memory_mb` plus the template's own anonymous memory: a forked process that writes
+    to pages it shares with the template gets private copies of them, which the job did not
+    allocate. The container's memory limit stays the hard bound (its OOM killer takes a
+    session's process first); a session that holds memory for less than `MEMORY_POLL_S` at a
+    time can go over its own limit unseen, never over the container's.
+    """
+
+    def __init__(self, *, base: int, pid1: int, limit: int) -> None:
+        self.base = base  # [bytes] the cgroup's anonymous + shared memory at the start
+        self.pid1 = pid1  # [bytes] PID 1's anonymous memory at the start
+        self.limit = limit  # [bytes]
+
+    @staticmethod
+    def start(memory_mb: int) -> MemoryWatch | None:
+        """The watch of a session about to be spawned; None where the cgroup is unreadable."""
+        base = _cgroup_memory()
+        if base is None:
+            return None
+        return MemoryWatch(base=base, pid1=_status_kib("RssAnon") << 10, limit=memory_mb << 20)
+
+    def allowing(self, inherited: int) -> MemoryWatch:
+        """The same watch with `inherited` bytes (the template's anonymous memory, which the
+        session may come to hold private copies of) added to the limit."""
+        return MemoryWatch(base=self.base, pid1=self.pid1, limit=self.limit + max(0, inherited))
+
+    def held(self) -> int:
+        """What the session holds now [bytes] (0 where the cgroup became unreadable)."""
+        now = _cgroup_memory()
+        if now is None:
+            return 0
+        grown = max(0, (_status_kib("RssAnon") << 10) - self.pid1)
+        return now - self.base - grown
+
+    def over(self) -> bool:
+        return self.held() > self.limit
+
+
 class _Tail:
     """The last `size` bytes of a stream and its total length."""
 
@@ -411,6 +471,7 @@ class _Child:
         base_rss: int,
         started: float,
         in_container: bool,
+        memory: MemoryWatch | None = None,
     ) -> None:
         self.id, self.pid = id, pid
         self.template = template
@@ -431,6 +492,16 @@ class _Child:
         self.peak_kib = 0  # peak resident memory of the process [KiB], known once it ended
         self.dead = ""  # why the session can answer no more calls
         self.in_container = in_container
+        self.memory = memory  # None: only RLIMIT_DATA (the local backend)
+        self.memory_read = 0.0  # when the memory was last read [monotonic s]
+
+    def over_memory(self, now: float, *, force: bool = False) -> bool:
+        """Whether the session holds more memory than its limit (read at most every
+        `MEMORY_POLL_S` unless `force`)."""
+        if self.memory is None or (not force and now - self.memory_read < MEMORY_POLL_S):
+            return False
+        self.memory_read = now
+        return self.memory.over()
 
     def exchange(
         self, request: bytes | None, sections: list[bytes], timeout: float, oom_before: Any
@@ -447,6 +518,8 @@ class _Child:
             return self._verdict("bad_output", self.dead), []
         t0 = time.monotonic()
         cpu0 = self.cpu_seconds()
+        queued0 = self.run_delays()
+        relay0 = _own_run_delay()
         deadline = t0 + max(timeout, 0.0)
         pending = memoryview(request) if request is not None else memoryview(b"")
         frame, over_cap = None, False
@@ -459,6 +532,8 @@ class _Child:
             if frame is not None or over_cap or self.status is not None:
                 break
             now = time.monotonic()
+            if self.memory is not None and self.over_memory(now):
+                return self._memory_out(self.memory, t0, cpu0), []
             if now >= deadline:
                 self.kill()
                 self.reap()
@@ -475,10 +550,17 @@ class _Child:
                     pass
                 except BrokenPipeError:
                     pending = memoryview(b"")
-            wait = min(deadline - now, 0.002 if pending else 0.05)
+            idle = MEMORY_POLL_S if self.memory is not None else 0.05
+            wait = min(deadline - now, 0.002 if pending else idle)
             for fd, _ in self.poll.poll(int(wait * 1000) + 1):
                 if fd in self.fds:
                     self._read(fd)
+        if (
+            self.memory is not None
+            and self.status is None
+            and self.over_memory(time.monotonic(), force=True)
+        ):  # it still holds too much once it answered
+            return self._memory_out(self.memory, t0, cpu0), []
         seconds = time.monotonic() - t0
         cpu = self.cpu_seconds() - cpu0
         oom_after = _oom_kills()
@@ -504,7 +586,53 @@ class _Child:
             head = self._death()
         head["seconds"] = round(seconds, 6)
         head["cpu_seconds"] = round(max(cpu, 0.0), 6)
+        queued = self.queued_seconds(queued0) if self.status is None else 0.0
+        queued += max(0, _own_run_delay() - relay0) / 1e9  # this process relaying meanwhile
+        head["queued_seconds"] = round(min(queued, seconds), 6)
         return head, out
+
+    def _memory_out(self, memory: MemoryWatch, t0: float, cpu0: float) -> dict[str, Any]:
+        """Kill a session over its memory limit: the call's ``oom`` answer."""
+        held = memory.held()
+        cpu = self.cpu_seconds() - cpu0
+        self.kill()
+        self.reap()
+        self._die("killed: it held more memory than its limit")
+        head = self._verdict(
+            "oom",
+            f"the job held {held / (1 << 20):.0f} MiB (shared memory and files in /tmp and "
+            f"/dev/shm included), over its limit of {memory.limit / (1 << 20):.0f} MiB",
+        )
+        head["seconds"] = round(time.monotonic() - t0, 6)
+        head["cpu_seconds"] = round(max(cpu, 0.0), 6)
+        return head
+
+    def run_delays(self) -> dict[str, int]:
+        """How long each thread of the session's process has waited, runnable, for a CPU so
+        far (its run-queue delay, /proc/PID/task/TID/schedstat) [ns], by thread id."""
+        out: dict[str, int] = {}
+        try:
+            tids = os.listdir(f"/proc/{self.pid}/task")
+        except OSError:
+            return out
+        for tid in tids:
+            try:
+                with open(f"/proc/{self.pid}/task/{tid}/schedstat", "rb") as f:
+                    out[tid] = int(f.read().split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+        return out
+
+    def queued_seconds(self, before: dict[str, int]) -> float:
+        """The longest any one thread of the session's process waited for a CPU since
+        `before` (`run_delays`) [s]: what a busy machine added to the call's wall time, about.
+        One thread's, not the sum: many threads made runnable at once pile up waits without
+        using much CPU, while one thread waits only as long as others run (CPU time the
+        checks count) or the machine is busy. Threads that ended, and the session's other
+        processes, are not looked at: the figure can only understate the wait."""
+        now = self.run_delays()
+        grown = [delay - before.get(tid, 0) for tid, delay in now.items()]
+        return max(0, *grown) / 1e9
 
     def cpu_seconds(self) -> float:
         """CPU time used so far by the program: the container's whole account inside the
@@ -773,6 +901,16 @@ def _status_kib(key: str) -> int:
     return 0
 
 
+def _own_run_delay() -> int:
+    """How long this process has waited, runnable, for a CPU [ns] (0 where unreadable): while
+    it relays a call's arguments or answer, the session's process waits on it."""
+    try:
+        with open("/proc/self/schedstat", "rb") as f:
+            return int(f.read().split()[1])
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
 def _cgroup_cpu_seconds() -> float | None:
     """CPU time the container's cgroup has used (v2 or v1) [s], None where unreadable."""
     try:
@@ -791,6 +929,31 @@ def _cgroup_cpu_seconds() -> float | None:
                 return int(f.read()) / 1e9
         except (OSError, ValueError):
             continue
+    return None
+
+
+_MEMORY_STAT = (  # (file, the keys whose sum is anonymous + shared memory): cgroup v2, v1
+    ("/sys/fs/cgroup/memory.stat", ("anon", "shmem")),
+    ("/sys/fs/cgroup/memory/memory.stat", ("total_rss", "total_shmem")),
+)
+
+
+def _cgroup_memory() -> int | None:
+    """Anonymous plus shared memory (shmem: tmpfs files, shared maps, memfds, System V
+    segments) charged to the container's cgroup [bytes], None where it cannot be read."""
+    for path, keys in _MEMORY_STAT:
+        try:
+            with open(path, "rb") as f:
+                text = f.read()
+        except OSError:
+            continue
+        found = {}
+        for line in text.splitlines():
+            key, _, value = line.partition(b" ")
+            if key.decode() in keys:
+                found[key.decode()] = int(value)
+        if len(found) == len(keys):
+            return sum(found.values())
     return None
 
 

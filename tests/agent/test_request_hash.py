@@ -5,12 +5,24 @@ from types import SimpleNamespace
 from agent.clients.base import ModelRequest, TextBlock
 from checks.context import check_fast_enough
 from checks.report import build_report, report_markdown
+from checks.timing import CallTiming, TimingLog
 
 
-def _slow_report(times: list[float], *, budget: float = 0.6) -> str:
-    """The feedback Markdown of a draft that fails `interface.fast_enough` (the real check)."""
+def _slow_report(times: list[float], *, budget: float = 0.6, wall: float = 0.0) -> str:
+    """The feedback Markdown of a draft that fails `interface.fast_enough` (the real check):
+    CPU times `times`, or, with `wall`, little CPU and `wall` more seconds of wall time."""
     cases = ["seed1/start/front", "seed2/goal/view1", "seed3/start/view2"]
-    draft = SimpleNamespace(seconds=[(cases[i % 3], t) for i, t in enumerate(times)])
+    calls = [
+        CallTiming(
+            label=cases[i % 3],
+            cpu_s=t / 100 if wall else t,
+            wall_s=t + wall,
+            key=str(i),
+            first=True,
+        )
+        for i, t in enumerate(times)
+    ]
+    draft = SimpleNamespace(timings=TimingLog(calls=calls))
     check = check_fast_enough("perceive", draft, budget)
     assert check.failing
     return report_markdown(
@@ -32,6 +44,13 @@ def test_measured_timings_do_not_change_the_hash():
     there = _slow_report([2.031, 2.4, 2.2, 1.9, 3.1, 2.0, 2.1])
     assert here != there  # the model reads what was measured ...
     assert _request(here).hash == _request(there).hash  # ... the hash leaves it out
+
+
+def test_measured_wall_times_do_not_change_the_hash():
+    here = _slow_report([1.674, 1.75, 1.6, 1.7, 1.1, 1.3, 1.69], wall=8.0)
+    there = _slow_report([2.031, 2.4, 2.2, 1.9, 3.1, 2.0, 2.1], wall=8.5)
+    assert "wall time" in here and here != there
+    assert _request(here).hash == _request(there).hash
 
 
 def test_everything_else_does():
