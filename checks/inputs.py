@@ -68,8 +68,10 @@ def _rng(seed: int, *key: str) -> np.random.Generator:
 
 @lru_cache(maxsize=512)
 def _instance(domain_name: str, seed: int) -> domains.Instance | None:
+    """The generator's instance at `seed` with an order the robot can execute (every step has
+    a 2F-85 grasp): `plan`'s hand-aware checks hold a plan to that."""
     try:
-        return domains.load(domain_name).generate(seed)
+        return domains.load(domain_name).generate(seed, grasps=True)
     except domains.GenerationError:
         return None
 
