@@ -119,7 +119,7 @@ class AuthoringRun:
         gate_rounds: int = GATE_ROUNDS,
     ) -> None:
         self.ctx = ctx
-        self.cases_seed = cases_seed
+        self.cases_seed: int | None = cases_seed
         self.gate = gate
         self.gate_rounds = gate_rounds
         self.client = client
@@ -159,13 +159,20 @@ class AuthoringRun:
         self.journal.event("finished")
         return frozen
 
+    @property
+    def run_seed(self) -> int:
+        """The run's check-case seed (decided when the run starts)."""
+        assert self.cases_seed is not None, "the run has not started"
+        return self.cases_seed
+
     def _gated(self, frozen: dict[str, str]) -> dict[str, str]:
         """Run the trial gate on the candidate set; a failure goes back as the feedback of the
         blamed function's next attempt, and the functions after it are checked again (and
         repaired where they now fail), until the gate passes or `gate_rounds` are spent."""
+        assert self.gate is not None
         order = authoring_order()
         for rnd in range(1, self.gate_rounds + 1):
-            seed = case_seed(self.cases_seed, "gate", rnd)
+            seed = case_seed(self.run_seed, "gate", rnd)
             self._say("gate", rnd, "running the trial gate")
             outcome = self.gate(dict(frozen), seed, self.journal.dir / "gate" / f"round{rnd}")
             self.journal.event(
@@ -212,7 +219,7 @@ class AuthoringRun:
             frozen[function],
             deps=deps,
             out_dir=out,
-            cases_seed=case_seed(self.cases_seed, f"{function}/recheck", attempt),
+            cases_seed=case_seed(self.run_seed, f"{function}/recheck", attempt),
         )
         self.journal.event("rechecked", function=function, passed=bool(report["passed"]))
         if report["passed"]:
@@ -327,7 +334,7 @@ class AuthoringRun:
                         source,
                         deps=deps,
                         out_dir=self.journal.images_dir(function, attempt),
-                        cases_seed=case_seed(self.cases_seed, function, attempt),
+                        cases_seed=case_seed(self.run_seed, function, attempt),
                     )
                     markdown = self.checker.markdown(report)
                     if truncated and not report["passed"]:

@@ -220,12 +220,12 @@ def run_gate(
                 progress(f"[gate {k + 1}/{trials}] {name}: {status}")
     finally:
         policy.close()
-    result = GateResult(
+    outcome = GateResult(
         domain=domain_name,
         seed=seed,
         trials=rows,
         duration_s=time.perf_counter() - t0,
         images=images,
     )
-    (work / "gate.json").write_text(json.dumps(result.to_dict(), indent=1) + "\n")
-    return result
+    (work / "gate.json").write_text(json.dumps(outcome.to_dict(), indent=1) + "\n")
+    return outcome

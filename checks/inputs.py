@@ -278,7 +278,7 @@ def perceive_cases(domain: Domain, budget: Budget, seed: int) -> list[dict[str, 
     """`budget.observations` observations drawn from the task's space (see the module
     docstring), `budget.hidden` of them the task text's hiding case where the domain has one."""
     rng = _rng(seed, "perceive")
-    out = []
+    out: list[dict[str, Any]] = []
     for _seed_h, recs, behind in hidden_views(domain, rng, budget.hidden):
         out.append(
             observation_case(
@@ -383,12 +383,12 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
         ]
         cases["infeasible"] = infeasible_cases(domain, pool, rng, budget.infeasible)
     elif function == "render":
-        scenes = []
+        views: list[dict[str, Any]] = []
         for k, (i, side, cam) in enumerate(budget.render_cases):
             inst = pool[i % len(pool)]
             recs = records(getattr(inst, side))
             name = f"{named(i % len(pool), inst)}/{side}/{cam}"
-            scenes.append(
+            views.append(
                 {
                     "name": name,
                     "records": recs,
@@ -399,7 +399,7 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
                 }
             )
             if k == 0:  # a small view for the cheap properties
-                scenes.insert(
+                views.insert(
                     0,
                     {
                         "name": f"{name}@1/{PROPERTY_RES}",
@@ -408,7 +408,7 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
                         "camera_name": cam,
                     },
                 )
-        cases["scenes"] = scenes
+        cases["scenes"] = views
     return cases
 
 

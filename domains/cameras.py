@@ -22,7 +22,7 @@ square pixels, the principal point at the image centre), the format of `docs/cam
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,7 +33,7 @@ MARGIN = 0.04  # a shown point stays this fraction of the image size inside its 
 MAX_TRIES = 200  # draws before `draw` gives up on showing every point
 
 
-def look_at(position: Sequence[float], target: Sequence[float], *, roll: float = 0.0) -> np.ndarray:
+def look_at(position: Any, target: Any, *, roll: float = 0.0) -> np.ndarray:
     """T_world_camera (4, 4) of a camera at `position` looking at `target`, image x level with
     the table, turned by `roll` [rad] about its optical axis (OpenCV axes)."""
     p, t = np.asarray(position, float), np.asarray(target, float)
@@ -158,7 +158,7 @@ class CameraEnvelope:
         fovy: float,
         roll: float = 0.0,
         size: tuple[int, int] = SIZES[0],
-        target: Sequence[float] | None = None,
+        target: Any = None,
     ) -> dict:
         """The camera with these parameters (degrees, metres)."""
         t = np.asarray(self.target if target is None else target, float)
@@ -192,7 +192,9 @@ class CameraEnvelope:
             )
             if shows_points is None or shows(cam, shows_points):
                 return cam
-        raise ValueError(f"no camera of the envelope shows all {len(shows_points)} points")
+        raise ValueError(
+            f"no camera of the envelope shows all {0 if shows_points is None else len(shows_points)} points"
+        )
 
     @property
     def description(self) -> str:
