@@ -88,7 +88,7 @@ RULES: tuple[Rule, ...] = (
     ),
     Rule(
         check="property.infeasible_explicit",
-        text="A goal no plan can reach gets `{\"status\": \"infeasible\", \"reason\": str}`, never "
+        text='A goal no plan can reach gets `{"status": "infeasible", "reason": str}`, never '
         "an exception or steps. The checks draw such goals afresh each time from the task's "
         "goals: an object floating at some height above where it would rest, two objects "
         "sunk into each other by some depth, a stack whose support was moved away, an object "
