@@ -2,10 +2,11 @@
 
 vision and segmentation (cameras, point clouds, planes, colour/depth masks), polygons (2D
 shape fitting), registration (ICP, global registration, mesh pose from points), render
-(offscreen rendering with the OpenCV camera), stability (the judge's own geometry: convex
-pieces, collisions, support, resting poses, loads), robot (the executor's hand and reach: can
-a step be made), packing (footprints, gaps, finger room), geometry (SE(3)),
-graphs (relation graphs), search (A*/BFS). `rivet toolbox docs` prints the prompt text.
+(offscreen rendering with the OpenCV camera), refine (several objects' poses fitted to an
+RGB-D image by render-and-compare), stability (the judge's own geometry: convex pieces,
+collisions, support, resting poses, loads), robot (the executor's hand and reach: can a step
+be made), packing (footprints, gaps, finger room), geometry (SE(3)), graphs (relation
+graphs), search (A*/BFS). `rivet toolbox docs` prints the prompt text.
 """
 
 from toolbox.errors import RendererUnavailableError, ToolboxError
@@ -46,6 +47,14 @@ from toolbox.polygons import (
     fit_polygon_pose,
     fit_rectangle,
     polygon_symmetry,
+)
+from toolbox.refine import (
+    GOOD_DEPTH_M,
+    GOOD_IOU,
+    MAX_SEEN_THROUGH,
+    PoseFit,
+    mesh_symmetries,
+    refine_poses,
 )
 from toolbox.registration import (
     RegistrationResult,
@@ -120,10 +129,13 @@ __all__ = [
     "COM_MARGIN",
     "FINGER_DEPTH",
     "FINGER_WIDTH",
+    "GOOD_DEPTH_M",
+    "GOOD_IOU",
     "GRASP_MARGINS",
     "JAW_CLEARANCES",
     "MAX_GRASP_WIDTH",
     "MAX_OPENING",
+    "MAX_SEEN_THROUGH",
     "PERCEIVED_GAP",
     "PERCEIVED_OVERLAP",
     "PLACEMENT",
@@ -142,6 +154,7 @@ __all__ = [
     "MoveVerdict",
     "PolygonFit",
     "PoseDistance",
+    "PoseFit",
     "Rectangle",
     "Region",
     "RegistrationResult",
@@ -185,6 +198,7 @@ __all__ = [
     "make_pose",
     "mask_contour",
     "mask_iou",
+    "mesh_symmetries",
     "new_relation_graph",
     "objects_above",
     "overlay_mask",
@@ -195,6 +209,7 @@ __all__ = [
     "pose_from_xyz_yaw",
     "project_points",
     "project_to_rotation",
+    "refine_poses",
     "register_mesh_to_points",
     "register_mesh_to_segment",
     "relation_changes",

@@ -23,6 +23,7 @@ MODULES = (
     "polygons",
     "registration",
     "render",
+    "refine",
     "stability",
     "robot",
     "packing",
