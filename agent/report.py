@@ -216,7 +216,11 @@ def summary(journal: Journal) -> dict:
                 for s in ("passed", "failed", "skipped")
             }
             counts["failed"] += sum(c["status"] == "error" for c in report["checks"])
-            out[function] = {"attempts": n, "checks": counts}
+            out[function] = {
+                "attempts": n,
+                "checks": counts,
+                "cases_seed": report.get("cases_seed"),
+            }
     return out
 
 

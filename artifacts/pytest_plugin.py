@@ -14,13 +14,18 @@ import pytest
 
 from contracts.functions import CODE_DEPS, authoring_order
 
-PLUGIN_SEED = 1  # the default case seed: a CI run checks what the last one checked
+PLUGIN_SEED = 1  # the case seed of a set whose manifest records none
 
 
-def _seed(config: pytest.Config) -> int | None:
+def _seed(config: pytest.Config, manifest: dict, function: str) -> int | None:
+    """The seed of the cases to check on: the one the frozen version passed on (its
+    manifest's), unless `--rivet-seed` names one or asks for fresh cases."""
     text = config.getoption("--rivet-seed")
     if text == "fresh":
         return None
+    if text == "frozen":
+        seed = manifest["functions"][function].get("cases_seed")
+        return PLUGIN_SEED if seed is None else int(seed)
     try:
         return int(text)
     except ValueError:
@@ -37,10 +42,11 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
     group.addoption(
         "--rivet-seed",
-        metavar="S|fresh",
-        default=str(PLUGIN_SEED),
-        help=f"the seed the check cases are drawn from (default {PLUGIN_SEED}, so that CI "
-        "repeats; 'fresh' draws new cases each run and prints their seed)",
+        metavar="S|frozen|fresh",
+        default="frozen",
+        help="the seed the check cases are drawn from: 'frozen' (default) the cases each "
+        "program passed on when it was frozen (its manifest's), so that CI repeats; 'fresh' "
+        "new cases each run (a failure names their seed); or a number",
     )
     group.addoption(
         "--rivet-sandbox",
@@ -111,7 +117,7 @@ class CheckItem(pytest.Item):
         from artifacts.store import verify
         from checks import report_markdown, run_checks
 
-        _, sources = verify(self.domain, self.path.parent.parent)
+        manifest, sources = verify(self.domain, self.path.parent.parent)
         backend = self.config.getoption("--rivet-sandbox")
         if backend not in self._executors:
             import sandbox
@@ -124,7 +130,7 @@ class CheckItem(pytest.Item):
             sources[self.program],
             deps=deps,
             executor=self._executors[backend],
-            cases_seed=_seed(self.config),
+            cases_seed=_seed(self.config, manifest, self.program),
         )
         if not report["passed"]:
             raise CheckFailed(

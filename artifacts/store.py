@@ -50,6 +50,7 @@ def build_manifest(
     prompt_hash: str | None = None,
     attempts: dict[str, int] | None = None,
     checks: dict[str, dict[str, int]] | None = None,
+    cases_seeds: dict[str, int] | None = None,
 ) -> dict[str, Any]:
     functions: dict[str, Any] = {}
     for name in FUNCTIONS:
@@ -64,6 +65,8 @@ def build_manifest(
             entry["attempts"] = attempts[name]
         if checks and name in checks:
             entry["checks"] = checks[name]
+        if cases_seeds and cases_seeds.get(name) is not None:
+            entry["cases_seed"] = int(cases_seeds[name])
         functions[name] = entry
     manifest: dict[str, Any] = {
         "schema_version": 1,

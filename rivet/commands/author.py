@@ -247,6 +247,7 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
                 prompt_hash=templates_hash(),
                 attempts={f: s["attempts"] for f, s in per_fn.items()},
                 checks={f: s["checks"] for f, s in per_fn.items()},
+                cases_seeds={f: s["cases_seed"] for f, s in per_fn.items()},
             )
             root = Path(args.artifacts) if args.artifacts else None
             # the set hash a manifest is stamped with, read as eval.json's is
