@@ -65,7 +65,7 @@ class Budget:
     name: str
     seed: int = 20250601
     instances: int = 8
-    composed: int = 2
+    composed: int = 6
     observations: int = 45
     hidden: int = 3
     infeasible: int = 8
@@ -96,7 +96,7 @@ DEFAULT = Budget(name="default")
 THOROUGH = Budget(
     name="thorough",
     instances=24,
-    composed=5,
+    composed=12,
     observations=90,
     hidden=6,
     infeasible=16,

@@ -9,7 +9,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 PROGRAMS = REPO / "domains" / "cubes" / "programs"
-CASES_SEED = 7  # the tests draw their check cases from one seed: the same cases every run
+CASES_SEED = 1  # the tests draw their check cases from one seed: the same cases every run
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("MUJOCO_GL", "egl")
