@@ -412,37 +412,6 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
     return cases
 
 
-def hardest_views(
-    domain: Domain, pool: list, n: int, *, exclude: list[tuple[int, str, str]]
-) -> list[tuple[int, str, str]]:
-    """The `n` (instance, side, camera) views whose least visible object shows the fewest
-    pixels: the views perception finds hardest. A view hiding an object entirely counts only
-    when the object can be inferred — it holds up another object — since nothing could find
-    it otherwise."""
-    if n <= 0:
-        return []
-    from toolbox import render_scene
-
-    meshes = domain.meshes()
-    scored = []
-    for i, inst in enumerate(pool):
-        for side in ("start", "goal"):
-            recs = records(inst.start if side == "start" else inst.goal)
-            graph = domain.reference_relations(recs)
-            supporters = {e["target"] for e in graph["edges"] if e["type"] == "on"}
-            for cam in domain.cameras:
-                if (i, side, cam) in exclude:
-                    continue
-                mask = render_scene(recs, meshes, camera(domain, cam, HALF_RES))["mask"]
-                areas = np.bincount(mask[mask >= 0].ravel(), minlength=len(recs))
-                hidden = [r["id"] for r, a in zip(recs, areas, strict=True) if a == 0]
-                if any(h not in supporters for h in hidden):
-                    continue
-                scored.append((int(areas.min()), i, side, cam))
-    scored.sort(key=lambda t: (t[0], t[1], t[2], t[3]))
-    return [(i, side, cam) for _, i, side, cam in scored[:n]]
-
-
 INFEASIBLE_KINDS = ("floating", "overlap", "unsupported", "outside")
 
 

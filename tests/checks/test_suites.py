@@ -171,7 +171,7 @@ def test_plan_walling_goal_places_in_is_caught_on_composed_goals(check):
 @pytest.mark.slow
 def test_perceive_dropping_a_cube_nothing_shows_is_caught_on_the_hidden_scene(check):
     """A cube behind a tower that holds nothing up: the task text says `perceive` still
-    reports it. No generated instance's view hides one (`hardest_views` skips such views);
+    reports it. Generated instances rarely hide one;
     `Domain.hidden_scene` does, and its pose is not scored, only that it is reported."""
     from benchmarks.checks_bench import catalogue, load_mutants, programs
 
