@@ -158,9 +158,8 @@ def _author_on_ray(args: argparse.Namespace, domain: str, runs_root: Path) -> in
                 str(args.attempts),
                 "--sandbox",
                 args.sandbox,
-                "--gate-trials",
-                str(args.gate_trials),
             ]
+            + (["--gate-trials", str(args.gate_trials)] if args.gate_trials is not None else [])
             + (["--max-usd", repr(share)] if share is not None else [])
             + (["--max-calls", str(args.max_calls)] if args.max_calls is not None else [])
         )
@@ -276,8 +275,15 @@ def _trials(text: str) -> int:
 
 
 def _gate(args, domain: str):
-    """The trial gate the run's candidate set must pass before it is frozen (None: off)."""
-    if not args.gate_trials:
+    """The trial gate the run's candidate set must pass before it is frozen (None: off).
+
+    Default: `GATE_TRIALS` trials for a model or an agent; none for a replay, which
+    reproduces the recorded run, and the reference transcripts were packed without a gate
+    (their sets' gate figures are in docs/results.md)."""
+    trials = args.gate_trials
+    if trials is None:
+        trials = 0 if not (args.model or args.agent) else GATE_TRIALS
+    if not trials:
         return None
     from artifacts.gate import run_gate
 
@@ -286,7 +292,7 @@ def _gate(args, domain: str):
             domain,
             sources,
             seed=seed,
-            trials=args.gate_trials,
+            trials=trials,
             sandbox=args.sandbox,
             out_dir=out,
             progress=lambda line: print(line, file=sys.stderr, flush=True),
@@ -369,10 +375,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--gate-trials",
         type=_trials,
-        default=GATE_TRIALS,
+        default=None,
         metavar="K",
         help=f"simulated trials of the gate the set must pass before it is frozen (default "
-        f"{GATE_TRIALS}; 0: no gate, docs/checks.md 'The trial gate')",
+        f"{GATE_TRIALS} for --model and --agent, none for a replay; 0: no gate; docs/checks.md "
+        "'The trial gate')",
     )
     p.add_argument(
         "--max-usd",
