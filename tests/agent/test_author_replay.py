@@ -34,13 +34,13 @@ def _transcript_domains() -> list[str]:
     ]
 
 
-@pytest.mark.docker
-@pytest.mark.slow
-@pytest.mark.parametrize("domain", _transcript_domains())
 def _events(run_dir: Path) -> list[dict]:
     return [json.loads(line) for line in (run_dir / "journal.jsonl").read_text().splitlines()]
 
 
+@pytest.mark.docker
+@pytest.mark.slow
+@pytest.mark.parametrize("domain", _transcript_domains())
 def test_replayed_authoring_reproduces_the_committed_artifacts(tmp_path, domain):
     committed = json.loads((REPO / "artifacts" / domain / "manifest.json").read_text())
     proc = subprocess.run(
