@@ -10,7 +10,11 @@ of the correct programs.
 
 Usage:
     python -m benchmarks.checks_bench [--domain all|cubes|tangram|assembly] [--repeats 10]
-        [--sandbox docker|local] [--only NAME[,NAME…]] [--out DIR]
+        [--sandbox docker|local] [--only NAME[,NAME…]] [--seed S] [--out DIR]
+Every mutant's check draws its cases afresh (`checks.inputs`); the repeats of a correct
+program share one draw, so that their reports can be compared. `--seed S` draws every check's
+cases from S instead; each row records the seed its cases came from (`cases_seed`), so
+`--only NAME --seed S` checks a mutant on the same cases again.
 Writes DIR/bench_checks.md (the table) and DIR/bench_checks.json — with `--domain all` (the
 default) one DIR/<domain>/ of each per domain and the per-domain totals in DIR; exit 0 when
 both targets are met in every domain, 1 otherwise, 2 for a broken catalogue.
@@ -94,12 +98,22 @@ def load_mutants(path: Path, references: dict[str, str]) -> list[Mutant]:
     return out
 
 
-def check(domain: str, function: str, source: str, refs: dict[str, str], executor: Any, out: Path):
+def check(
+    domain: str,
+    function: str,
+    source: str,
+    refs: dict[str, str],
+    executor: Any,
+    out: Path,
+    seed: int | None = None,
+):
     from checks import run_checks
 
     deps = {d: refs[d] for d in CODE_DEPS[function]}
     t0 = time.perf_counter()
-    report = run_checks(domain, function, source, deps=deps, executor=executor, out_dir=out)
+    report = run_checks(
+        domain, function, source, deps=deps, executor=executor, out_dir=out, cases_seed=seed
+    )
     return report, time.perf_counter() - t0
 
 
@@ -120,6 +134,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--sandbox", choices=("docker", "local"), default="docker")
     parser.add_argument("--only", default="", help="comma-separated mutant names (no repeats)")
+    parser.add_argument(
+        "--seed", type=int, default=None, help="draw every check's cases from this seed"
+    )
     parser.add_argument("--out", type=Path, default=REPO / "runs" / "bench-checks")
     args = parser.parse_args(argv)
 
@@ -176,6 +193,7 @@ def bench_domain(
     """One domain's benchmark: its correct programs `args.repeats` times, each mutant once;
     writes OUT/bench_checks.{md,json}; (summary, both targets met)."""
     from checks import comparable
+    from checks.inputs import fresh_seed
 
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
@@ -184,9 +202,10 @@ def bench_domain(
     mutant_rows: list[dict[str, Any]] = []
     repeats = 0 if only else args.repeats
     for fn in FUNCTIONS if repeats else ():
+        seed = fresh_seed() if args.seed is None else args.seed  # one draw for the repeats
         reports = []
         for k in range(repeats):
-            report, dt = check(domain, fn, refs[fn], refs, ex, out / "images" / fn)
+            report, dt = check(domain, fn, refs[fn], refs, ex, out / "images" / fn, seed)
             times.append(dt)
             reports.append(report)
             print(
@@ -202,10 +221,13 @@ def bench_domain(
                 "rejections": sum(not r["passed"] for r in reports),
                 "identical_reports": identical,
                 "rejected_by": sorted({n for r in reports for n in failing(r)}),
+                "cases_seed": seed,
             }
         )
     for m in mutants:
-        report, dt = check(domain, m.function, m.source, refs, ex, out / "images" / m.name)
+        report, dt = check(
+            domain, m.function, m.source, refs, ex, out / "images" / m.name, args.seed
+        )
         times.append(dt)
         fails = failing(report)
         mutant_rows.append(
@@ -216,12 +238,21 @@ def bench_domain(
                 "caught": not report["passed"],
                 "first_failure": report["first_failure"],
                 "failing": fails,
+                # each failing check's [cases failed, cases checked]: a mutant that fails only
+                # where the correct program fails too (same seed) is not caught
+                "failures": {
+                    c["name"]: [c.get("failures"), c.get("examples")]
+                    for c in report["checks"]
+                    if c["name"] in fails
+                },
                 "seconds": round(dt, 1),
+                "cases_seed": report.get("cases_seed"),
             }
         )
         print(
             f"{domain} {m.name}: "
-            f"{'caught by ' + str(report['first_failure']) if fails else 'MISSED'} ({dt:.1f} s)",
+            f"{'caught by ' + str(report['first_failure']) if fails else 'MISSED'} ({dt:.1f} s, "
+            f"cases seed {report.get('cases_seed')})",
             flush=True,
         )
     caught = sum(r["caught"] for r in mutant_rows)
