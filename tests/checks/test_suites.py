@@ -193,7 +193,10 @@ def test_image_render_opengl_convention(check):
         "@ np.diag([1.0, -1.0, -1.0, 1.0]))\n    out = render_scene(",
     )
     report = check("render", source)
-    assert report["first_failure"] == "image.render_vs_simulator"
+    # a camera looking away draws no object: the pixel properties, which must judge a minimum
+    # of object pixels, fail first; the image check says how far the render is from the scene
+    assert report["first_failure"] == "property.depth_where_visible"
+    assert "image.render_vs_simulator" in failing(report)
     c = by_name(report, "image.render_vs_simulator")
     assert "silhouette IoU" in c["message"] and c["images"]
     assert c["metrics"]["iou_mean"] < 0.2
