@@ -45,7 +45,9 @@ def test_docs_list_every_public_name_and_are_deterministic():
     for module, attr, _ in public_objects():
         assert f"## toolbox.{module}" in text
         assert f"`{attr}" in text, attr
-    assert len(text) < 56_000  # a prompt section (~14k tokens, the pose refiner included), not a manual
+    assert (
+        len(text) < 56_000
+    )  # a prompt section (~14k tokens, the pose refiner included), not a manual
 
 
 def test_docs_can_be_restricted_to_modules():
