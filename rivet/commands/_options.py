@@ -60,3 +60,18 @@ def add_sandbox_option(parser: argparse.ArgumentParser, *, what: str = "the prog
         help=f"where {what} run: docker (default) or local (faster, isolates nothing; refused "
         f"while {', '.join(CREDENTIAL_VARIABLES)} is set)",
     )
+
+
+def int_at_least(low: int):
+    """An argparse type: an integer of at least `low` (usage error otherwise)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be at least {low}, got {value}")
+        return value
+
+    return parse

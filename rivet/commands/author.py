@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from contracts.errors import UsageError
-from rivet.commands._options import add_sandbox_option
+from rivet.commands._options import add_sandbox_option, int_at_least
 
 GATE_TRIALS = 8  # artifacts.gate.GATE_TRIALS (not imported here: the CLI starts light)
 
@@ -264,16 +264,6 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
             print(f"spent ${ledger.spent_usd:.2f}{limit} in {ledger.calls} calls", file=sys.stderr)
 
 
-def _trials(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
-    return value
-
-
 def _gate(args, domain: str):
     """The trial gate the run's candidate set must pass before it is frozen (None: off).
 
@@ -374,7 +364,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--gate-trials",
-        type=_trials,
+        type=int_at_least(0),
         default=None,
         metavar="K",
         help=f"simulated trials of the gate the set must pass before it is frozen (default "

@@ -22,7 +22,7 @@ from typing import Any
 
 from contracts.errors import UsageError
 from contracts.functions import CODE_DEPS, FUNCTIONS
-from rivet.commands._options import add_sandbox_option
+from rivet.commands._options import add_sandbox_option, int_at_least
 
 
 def register(subparsers: Any) -> None:
@@ -42,7 +42,9 @@ def register(subparsers: Any) -> None:
         metavar="DIR",
         help="run the trial gate alone on DIR/{render,perceive,relate,plan}.py instead",
     )
-    p.add_argument("--trials", type=_positive, metavar="K", help="trials of the gate (default: 8)")
+    p.add_argument(
+        "--trials", type=int_at_least(1), metavar="K", help="trials of the gate (default: 8)"
+    )
     p.add_argument("--thorough", action="store_true", help="more instances and examples (slower)")
     p.add_argument(
         "--deps",
@@ -65,16 +67,6 @@ def register(subparsers: Any) -> None:
         help="draw the cases from seed S (default: a fresh seed, printed with the report)",
     )
     p.set_defaults(handler=run)
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
 
 
 def _seed(text: str) -> int:
