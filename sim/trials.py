@@ -408,7 +408,11 @@ def run_trial(
             instance.goal,
             released=_released(model, data, [o["id"] for o in instance.start["objects"]]),
         )
-        final_ok = score.success
+        # A trial stopped at its deadline fails, wherever the objects were when it stopped:
+        # the plan did not run to its end.
+        final_ok = score.success and not (
+            execution_failure is not None and execution_failure["kind"] == "deadline"
+        )
         object_errors = [e.to_dict() for e in score.objects]
         if not final_ok and failure is None:
             bad = [e for e in score.objects if not e.within]
