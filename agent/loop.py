@@ -33,7 +33,7 @@ from agent.prompt import DomainContext, Feedback, build_request
 from agent.report import report_image
 from checks.inputs import case_seed, fresh_seed
 from checks.report import sanitise_text
-from contracts.functions import CODE_DEPS, authoring_order
+from contracts.functions import authoring_order
 
 
 class Checker(Protocol):
@@ -211,7 +211,7 @@ class AuthoringRun:
         still passes, repaired from its next attempt when not."""
         attempt = self._next_attempt(function)
         out = self.journal.images_dir(function, attempt) / "recheck"
-        deps = {d: frozen[d] for d in CODE_DEPS[function]}
+        deps = {d: src for d, src in frozen.items() if d != function}
         self._say(function, attempt, "checking the frozen version against its new dependencies")
         report = self.checker.check(
             self.ctx.domain,
@@ -327,7 +327,7 @@ class AuthoringRun:
                 saved = self.journal.saved_report(function, attempt)
                 if saved is None:
                     self._say(function, attempt, "checking the draft")
-                    deps = {d: frozen[d] for d in CODE_DEPS[function]}
+                    deps = {d: src for d, src in frozen.items() if d != function}
                     report = self.checker.check(
                         self.ctx.domain,
                         function,

@@ -20,7 +20,7 @@ from importlib import resources
 from string import Template
 
 from agent.clients.base import Block, ImageBlock, ModelRequest, TextBlock
-from contracts.functions import CODE_DEPS, CONTRACT_DEPS, FUNCTIONS, SIGNATURES
+from contracts.functions import CODE_DEPS, CONTRACT_DEPS, SIGNATURES, authoring_order
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -64,18 +64,14 @@ def templates_hash() -> str:
 
 
 def frozen_use(function: str, dep: str) -> str:
-    """How `function`'s draft may use its frozen dependency `dep`. A check loads a module
-    beside the frozen modules of its own function's `CODE_DEPS` only (`checks.calls.
-    session_modules`), so `dep` is importable only when every later function whose checks load
-    `function`'s module loads `dep` too."""
-    without = [g for g in FUNCTIONS if function in CODE_DEPS[g] and dep not in CODE_DEPS[g]]
-    if not without:
+    """How `function`'s draft may use its frozen dependency `dep`. Every session that loads
+    `function`'s module holds the frozen programs before it in authoring order (the checks
+    compose their sessions as the runtime does: `checks.calls.session_modules`), so `dep` is
+    importable when it comes before `function` in that order."""
+    order = authoring_order()
+    if order.index(dep) < order.index(function):
         return f"already checked; importable as `from {dep} import {dep}`"
-    names = " or ".join(f"`{g}`" for g in without)
-    return (
-        f"already checked; shown for reference, not to import: when {names} is checked, your "
-        f"`{function}` is loaded without `{dep}` beside it, and the import would fail there"
-    )
+    return f"shown for reference, not to import: `{dep}` is written after `{function}`"
 
 
 def build_request(

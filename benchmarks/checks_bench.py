@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from contracts.functions import CODE_DEPS, FUNCTIONS
+from contracts.functions import FUNCTIONS
 
 REPO = Path(__file__).resolve().parent.parent
 TARGET_CAUGHT = 0.95
@@ -109,7 +109,7 @@ def check(
 ):
     from checks import run_checks
 
-    deps = {d: refs[d] for d in CODE_DEPS[function]}
+    deps = {d: src for d, src in refs.items() if d != function}
     t0 = time.perf_counter()
     report = run_checks(
         domain, function, source, deps=deps, executor=executor, out_dir=out, cases_seed=seed

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from checks.timing import TimingLog
+from contracts.functions import authoring_order
 from contracts.limits import clip, count_problem
 from sandbox import CallReport, ExceptionInfo, Session
 
@@ -151,6 +152,19 @@ class DraftCalls:
         return CallResult.of(self.session.signature(self.module, self.module), self.budget)
 
 
-def session_modules(function: str, source: str, deps: Mapping[str, str]) -> dict[str, str]:
-    """The modules of a draft's session: the frozen functions it imports, then the draft."""
-    return {**{k: v for k, v in deps.items() if k != function}, function: source}
+def session_modules(function: str, source: str, frozen: Mapping[str, str]) -> dict[str, str]:
+    """The modules of a check's session, composed as the runtime composes its one session
+    (`artifacts.runtime.System.program`): every frozen program of the set, with `source` in
+    `function`'s place, in authoring order. A draft checked this way sees the modules it will
+    run beside; once the set is whole (a re-check, the pytest plugin) it is exactly the
+    runtime's session."""
+    modules = {**{k: v for k, v in frozen.items() if k != function}, function: source}
+    return {name: modules[name] for name in authoring_order() if name in modules}
+
+
+def frozen_up_to(function: str, frozen: Mapping[str, str]) -> dict[str, str]:
+    """The frozen programs a session that calls the frozen `function` alone holds: it and
+    those before it in authoring order, which its module may import."""
+    order = authoring_order()
+    before = set(order[: order.index(function) + 1])
+    return {k: v for k, v in frozen.items() if k in before}

@@ -25,7 +25,7 @@ import numpy as np
 import domains
 from checks import properties, suites
 from checks.budget import DEFAULT, THOROUGH, Budget
-from checks.calls import CallResult, DraftCalls, session_modules
+from checks.calls import CallResult, DraftCalls, frozen_up_to, session_modules
 from checks.context import (
     DomainSpec,
     SuiteContext,
@@ -43,7 +43,7 @@ from checks.suites import perceive as perceive_suite
 from checks.suites import render as render_suite
 from checks.suites.plan import Unrelated
 from contracts.errors import UsageError
-from contracts.functions import CODE_DEPS, FUNCTIONS
+from contracts.functions import FUNCTIONS
 from sandbox import MESHES, Executor, Program
 
 
@@ -65,11 +65,12 @@ def run_checks(
         domain: a registered domain name (e.g. "cubes").
         function: "render", "perceive", "relate" or "plan".
         source: the draft module's source; it must define `function`.
-        deps: frozen sources of the functions it depends on, by function name (e.g.
-            {"relate": src} for `plan`); the draft imports them by these names. Where one is
-            absent the domain's ground truth stands in for what the judge needs of it
-            (reference relations for `plan`, the toolbox renderer to redraw what `perceive`
-            found).
+        deps: the set's frozen programs, by function name (e.g. {"render": src, "perceive":
+            src, "relate": src} for `plan`). The draft's session holds all of them, as the
+            runtime's one session does (`checks.calls.session_modules`); the draft imports
+            them by these names. Where a function the judge needs is absent the domain's
+            ground truth stands in for it (reference relations for `plan`, the toolbox
+            renderer to redraw what `perceive` found).
         thorough: more instances, observations and hypothesis examples (`THOROUGH`).
         executor: a `sandbox.Executor` to run the sessions in; None opens (and closes) the
             Docker backend, and fails loudly when Docker is unavailable.
@@ -91,7 +92,7 @@ def run_checks(
     spec = DomainSpec.of(dom)
     seed = fresh_seed() if cases_seed is None else int(cases_seed)
     cases = build_cases(dom, function, budget, seed)
-    deps = {k: v for k, v in deps.items() if k in CODE_DEPS[function]}
+    deps = {k: v for k, v in deps.items() if k in FUNCTIONS and k != function}
     own = executor is None
     ex: sandbox.Executor = sandbox.open_executor("docker") if executor is None else executor
     try:
@@ -182,7 +183,7 @@ def _relate_states(
 ) -> None:
     """The relations of every state `plan` is checked on, from the frozen `relate` in a
     session of its own (replacing the reference relations in `cases`)."""
-    modules = session_modules("relate", deps["relate"], {})
+    modules = session_modules("relate", deps["relate"], frozen_up_to("relate", deps))
     timeout = float(budget.call_timeout["relate"])
     program = Program(modules=modules, meshes=spec.meshes)
     with ex.open_session(program, load_timeout_s=budget.load_timeout) as session:
@@ -227,7 +228,8 @@ def _rerender(
             out[case["name"]] = _rendered(known, got)
         return out
     timeout = float(budget.call_timeout["render"])
-    program = Program(modules=session_modules("render", deps["render"], {}), meshes=spec.meshes)
+    modules = session_modules("render", deps["render"], frozen_up_to("render", deps))
+    program = Program(modules=modules, meshes=spec.meshes)
     with ex.open_session(program, load_timeout_s=budget.load_timeout) as session:
         for case, known in jobs:
             if not session.load.ok:

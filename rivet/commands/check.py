@@ -3,9 +3,10 @@
 (`artifacts.gate`): simulated trials on fresh tasks, each through its own drawn camera.
 
 Exit 0 when every check passes, 1 when one fails, 2 for bad input (an unknown domain or
-function, an unreadable file). The functions the draft depends on come from `--deps DIR`
-(`DIR/<name>.py`, e.g. the frozen `artifacts/cubes/`); where none is given, the domain's ground
-truth stands in for them (its reference relations when checking `plan`, the toolbox renderer
+function, an unreadable file). The set's other programs come from `--deps DIR` (`DIR/<name>.py`,
+e.g. the frozen `artifacts/cubes/`): the draft's session holds every one found, as the runtime's
+session holds all four. Where the judge needs one that is not there, the domain's ground truth
+stands in for it (its reference relations when checking `plan`, the toolbox renderer
 when re-rendering what `perceive` found).
 
 The cases are drawn afresh on every run (`checks.inputs`); the report names the seed they were
@@ -50,7 +51,8 @@ def register(subparsers: Any) -> None:
         "--deps",
         type=Path,
         metavar="DIR",
-        help="folder holding the frozen functions the draft depends on, as <name>.py",
+        help="folder holding the set's other frozen programs, as <name>.py (all are loaded "
+        "beside the draft, as at run time)",
     )
     add_sandbox_option(p, what="the draft and its frozen dependencies")
     p.add_argument(
@@ -87,15 +89,15 @@ def _read(path: Path, what: str) -> str:
 
 
 def dependencies(function: str, folder: Path | None) -> dict[str, str]:
-    """The dependency sources found in `folder` ({} without one)."""
+    """The set's other programs found in `folder` ({} without one)."""
     if folder is None:
         return {}
     if not folder.is_dir():
         raise UsageError(f"--deps {folder}: not a folder")
     return {
         name: _read(folder / f"{name}.py", "dependency")
-        for name in CODE_DEPS[function]
-        if (folder / f"{name}.py").is_file()
+        for name in FUNCTIONS
+        if name != function and (folder / f"{name}.py").is_file()
     }
 
 

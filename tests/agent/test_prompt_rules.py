@@ -24,7 +24,7 @@ from agent.prompt import build_request, template
 from checks import properties
 from checks.rules import OPTIONAL, PLACEHOLDER, Stated, render, rules_for
 from checks.suites import RULES, interface_rules
-from contracts.functions import CODE_DEPS, CONTRACT_DEPS, FUNCTIONS
+from contracts.functions import CODE_DEPS, CONTRACT_DEPS, FUNCTIONS, authoring_order
 
 REPO = Path(__file__).resolve().parents[2]
 DOMAINS = ("cubes", "tangram", "assembly")
@@ -379,28 +379,30 @@ def test_the_answer_format_the_prompt_allows_is_what_extraction_takes(domain):
         extract_draft(drawing, "render")
 
 
-def test_a_frozen_function_is_offered_for_import_only_where_every_check_loads_it():
-    """A check loads a draft beside the frozen modules of its own `CODE_DEPS` only
-    (`checks.calls.session_modules`), and the frozen `relate` that computes `plan`'s states
-    runs alone: `relate` importing `render` would pass its own checks and break `plan`'s."""
-    from checks.calls import session_modules
+def test_a_frozen_function_is_offered_for_import_only_where_every_session_loads_it():
+    """A check composes its sessions as the runtime does (`checks.calls.session_modules`):
+    the draft beside every frozen program, and a frozen function called alone beside those
+    before it. A frozen dependency the prompt offers for import is in every session that loads
+    the function's module; here, every code dependency is."""
+    from checks.calls import frozen_up_to, session_modules
 
     domain = domains.load("cubes")
+    everything = {f: "" for f in FUNCTIONS}
     for function in FUNCTIONS:
         text = prompt_text(domain, function)
+        loads = [session_modules(g, "", everything) for g in FUNCTIONS]  # checks, runtime
+        loads += [  # a frozen function called alone (plan's relations, perceive's re-render)
+            session_modules(g, "", frozen_up_to(g, everything))
+            for g in authoring_order()[authoring_order().index(function) :]
+        ]
         for dep in CODE_DEPS[function]:
-            loads = [
-                session_modules(g, "", {d: "" for d in CODE_DEPS[g]})
-                for g in FUNCTIONS
-                if function in CODE_DEPS[g]
-            ]
             head = text[text.index(f"## Frozen `{dep}`") :].split("\n")[0]
-            if all(dep in modules for modules in loads):
-                assert f"importable as `from {dep} import {dep}`" in head, head
-            else:
-                assert "not to import" in head and "importable" not in head, head
+            assert f"importable as `from {dep} import {dep}`" in head, head
+            assert all(dep in modules for modules in loads if function in modules)
     relate = prompt_text(domain, "relate")
-    assert "## Frozen `render` (already checked; shown for reference, not to import" in relate
+    assert "## Frozen `render` (already checked; importable as `from render import render`)" in (
+        relate
+    )
 
 
 def test_the_toolbox_docs_name_only_what_a_program_can_reach(toolbox_text):
