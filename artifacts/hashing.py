@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import json
 from collections.abc import Mapping
@@ -24,7 +25,8 @@ def set_hash(file_hashes: Mapping[str, str]) -> str:
 
 
 def tree_hash(*packages: str, patterns: tuple[str, ...] = ("*.py", "*.json", "*.md")) -> str:
-    """sha256 over the packages' source files (relative path + bytes), e.g. `contracts`."""
+    """sha256 over what the packages' source files can change of behaviour (relative path +
+    `behaviour_bytes`), e.g. `contracts`."""
     h = hashlib.sha256()
     files = sorted(
         {
@@ -36,8 +38,45 @@ def tree_hash(*packages: str, patterns: tuple[str, ...] = ("*.py", "*.json", "*.
         }
     )
     for p in files:
-        h.update(str(p.relative_to(REPO)).encode() + b"\0" + p.read_bytes() + b"\0")
+        h.update(str(p.relative_to(REPO)).encode() + b"\0" + behaviour_bytes(p) + b"\0")
     return h.hexdigest()
+
+
+def behaviour_bytes(path: Path) -> bytes:
+    """What of a source file can change what code does: a Python module's syntax tree with
+    its docstrings removed (comments and formatting are not in it), a JSON file's canonical
+    form, any other file's bytes. What the prompts show of the code (the toolbox's public
+    docstrings) is hashed apart, as the documentation (`toolbox_docs_hash`)."""
+    text = path.read_bytes()
+    if path.suffix == ".py":
+        tree = ast.parse(text, filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(
+                node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef
+            ) and _has_docstring(node):
+                node.body = node.body[1:] or [ast.Pass()]
+        return ast.dump(tree, include_attributes=False).encode()
+    if path.suffix == ".json":
+        return json.dumps(json.loads(text), sort_keys=True, separators=(",", ":")).encode()
+    return text
+
+
+def _has_docstring(node: ast.AST) -> bool:
+    body = getattr(node, "body", [])
+    return bool(
+        body
+        and isinstance(body[0], ast.Expr)
+        and isinstance(body[0].value, ast.Constant)
+        and isinstance(body[0].value.value, str)
+    )
+
+
+def toolbox_docs_hash() -> str:
+    """sha256 of the toolbox documentation the prompts show (`toolbox.docs.toolbox_docs`,
+    built from the public docstrings)."""
+    from toolbox.docs import toolbox_docs
+
+    return sha256_text(toolbox_docs())
 
 
 # What a frozen set passed its checks against (the manifest's `contracts_hash` and
@@ -47,8 +86,11 @@ CHECKED_AGAINST = {"contracts_hash": ("contracts",), "toolbox_hash": ("toolbox",
 
 
 def checked_against() -> dict[str, str]:
-    """The current `contracts_hash` and `toolbox_hash` of this checkout."""
-    return {key: tree_hash(*trees) for key, trees in CHECKED_AGAINST.items()}
+    """The current `contracts_hash` and `toolbox_hash` of this checkout: the toolbox hash
+    covers the code's behaviour and the documentation the prompts show of it."""
+    out = {key: tree_hash(*trees) for key, trees in CHECKED_AGAINST.items()}
+    out["toolbox_hash"] = sha256_text(out["toolbox_hash"] + toolbox_docs_hash())
+    return out
 
 
 def changed_since_checked(manifest: dict) -> list[str]:
