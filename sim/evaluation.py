@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from sim.trials import HONEST, Protocol
+from sim.trials import HONEST, TrialProtocol
 
 PolicySpec = tuple[str, str | None]  # ("oracle" | "programs" | "artifacts", folder or None)
 POLICY_FACTORY = "artifacts.policy:make_policy"
@@ -55,7 +55,7 @@ class EvalConfig:
     policy: PolicySpec
     view: str = "front"
     camera: Any = None
-    protocol: Protocol = HONEST
+    protocol: TrialProtocol = HONEST
     split: str = "dev"
     sandbox: str = "docker"
     record_root: str | None = None

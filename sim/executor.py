@@ -7,7 +7,7 @@ that belief (`sim.transfer`). It senses only through `sim.sensing`: the gripper'
 (jaw opening, pad contact) to detect a failed or lost grasp, and, when configured, a wrist
 camera's noisy in-hand pose estimate to correct the place (`ExecutorConfig.in_hand`, on by
 default) or an explicit ground-truth object tracker (`ExecutorConfig.track_objects`, off by
-default: the previous protocol). It commands the robot's actuators and never writes an
+default: the oracle-sensing protocol). It commands the robot's actuators and never writes an
 object's state (objects are never teleported).
 
 Each transfer is grasp selection → approach above → descend → close → lift → transfer at a

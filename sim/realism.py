@@ -3,7 +3,7 @@
 One config, `Realism`, with three levels (`LEVELS`; docs/observations.md has the table and
 the reasoning behind every value):
 
-- `clean` — the previous protocol exactly: the clean MuJoCo render under the nominal lights,
+- `clean` — the oracle-sensing protocol's images: the clean MuJoCo render under the nominal lights,
   the stereo depth model `DEFAULT_NOISE`, and a perfectly calibrated camera. Its images are
   bit-identical to ``observe(domain, scene, camera, noise=DEFAULT_NOISE, seed=s)``.
 - `default` — a ZED 2i (the front observation camera) in a normally lit lab: RGB shot and

@@ -12,7 +12,7 @@ is allowed only here, each use named for what it stands for:
   camera (the paper's ZED M): the true relative pose plus seeded Gaussian noise. Off, the
   executor is open loop after the grasp.
 - `ObjectTracker`: ground-truth object poses before each pick — a sensor no real robot has,
-  switched on only explicitly (the previous protocol, and to show what perception costs).
+  switched on only explicitly (the oracle-sensing protocol, to show what perception costs).
 - `PlacementMeter`: the placement error after each release, for scoring only (the executor
   never reads it).
 
@@ -99,7 +99,7 @@ WRIST_CAMERA = InHandNoise()
 """A wrist camera looking at the object in the hand from ~10 cm (the paper's ZED M: at that
 range a fitted pose is good to a few tenths of a millimetre and degree)."""
 EXACT = InHandNoise(position=0.0, rotation=0.0)
-"""The previous protocol's in-hand reading: the true relative pose."""
+"""The oracle-sensing protocol's in-hand reading: the true relative pose."""
 
 
 class InHandSensor:

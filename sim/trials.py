@@ -5,10 +5,10 @@ Design rule: a trial never raises for the work failing; it returns a `TrialResul
 motion or execution — so the harness always goes on with the next trial. Only a broken
 harness raises.
 
-What each party knows (the honest protocol, `Protocol`): the policy gets the two observations
+What each party knows (the honest protocol, `TrialProtocol`): the policy gets the two observations
 — rendered from the true camera with the protocol's realism, handed over with the *calibrated*
 camera — and returns a plan and the states it perceived; the executor gets the plan and the
-perceived start state as its belief, and senses what `Protocol` switches on. The instance's
+perceived start state as its belief, and senses what `TrialProtocol` switches on. The instance's
 ground truth is read only to render the observations and to score. The oracle policy is the
 exception by definition: ground-truth states and the reference construction order, so it
 measures the executor alone.
@@ -28,7 +28,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
-from typing import Protocol as TypingProtocol
 
 import mujoco
 import numpy as np
@@ -67,7 +66,7 @@ _STAGE_OF_FUNCTION: dict[str, Stage] = {
 
 
 @dataclass(frozen=True, kw_only=True)
-class Protocol:
+class TrialProtocol:
     """What a trial's observations are like and what the robot senses while executing.
 
     Attributes:
@@ -103,10 +102,10 @@ class Protocol:
         return replace(base or ExecutorConfig(), in_hand=noise, track_objects=self.track_objects)
 
 
-HONEST = Protocol()
-PREVIOUS = Protocol(realism="clean", in_hand="exact", track_objects=True)
-"""The protocol of the tables before the honest one: clean images, the true camera, and an
-executor that reads every object's true pose."""
+HONEST = TrialProtocol()
+ORACLE_SENSING = TrialProtocol(realism="clean", in_hand="exact", track_objects=True)
+"""Sensing no real robot has: clean images, the true camera, an exact in-hand pose and an
+executor that reads every object's true pose. Measures what perception errors cost."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -117,15 +116,6 @@ class PolicyOutput:
     start_state: dict | None  # {"objects", "relations"} as perceived; None for the oracle
     goal_state: dict | None
     timings: dict[str, float] = field(default_factory=dict)  # [s]
-
-
-class Policy(TypingProtocol):
-    """A policy sees only the two observations (with the calibrated camera)."""
-
-    name: str
-    oracle: bool
-
-    def solve(self, domain: Domain, start_obs: dict, goal_obs: dict) -> PolicyOutput: ...
 
 
 class OraclePolicy:
@@ -222,7 +212,7 @@ def _state_reason(score, side: str) -> tuple[Stage, str]:
 
 
 def observations(
-    domain: Domain, instance: Instance, camera: Any, protocol: Protocol
+    domain: Domain, instance: Instance, camera: Any, protocol: TrialProtocol
 ) -> tuple[dict, dict]:
     """The trial's start and goal observations: seeded by the instance's name, one camera
     calibrated once for both (what the policy is given)."""
@@ -259,7 +249,7 @@ def run_trial(
     policy: Any,
     *,
     camera: Any = "front",
-    protocol: Protocol = HONEST,
+    protocol: TrialProtocol = HONEST,
     record_dir: Path | None = None,
     config: ExecutorConfig | None = None,
     deadline_s: float = TRIAL_DEADLINE_S,

@@ -87,12 +87,14 @@ def _composed(domain, seed: int, n: int) -> list[dict]:
 
 
 def protocol_of(args: argparse.Namespace):
-    """The trial protocol the options name (`--protocol previous` is clean images, the true
+    """The trial protocol the options name (`--protocol oracle-sensing` is clean images, the true
     camera, an exact in-hand pose and a ground-truth object tracker)."""
-    from sim.trials import HONEST, PREVIOUS, Protocol
+    from sim.trials import HONEST, ORACLE_SENSING, TrialProtocol
 
-    base = PREVIOUS if args.protocol == "previous" else HONEST
-    return Protocol(
+    if args.protocol == "previous":  # the old name, kept for scripts that use it
+        print("warning: --protocol previous is now --protocol oracle-sensing", file=sys.stderr)
+    base = ORACLE_SENSING if args.protocol in ("oracle-sensing", "previous") else HONEST
+    return TrialProtocol(
         realism=args.realism or base.realism,
         in_hand=args.in_hand or base.in_hand,
         track_objects=args.track_objects or base.track_objects,
@@ -307,9 +309,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--protocol",
-        choices=("honest", "previous"),
+        choices=("honest", "oracle-sensing", "previous"),
         default="honest",
-        help="previous: --realism clean --in-hand exact --track-objects (the earlier tables)",
+        help="oracle-sensing: --realism clean --in-hand exact --track-objects (sensing no real "
+        "robot has: measures what perception errors cost); previous: its old name",
     )
     add_sandbox_option(p, what="the policy's programs")
     p.add_argument(

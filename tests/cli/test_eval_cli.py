@@ -96,3 +96,27 @@ def test_composed_goals_run_as_instances_and_a_domain_without_a_composer_is_refu
         cwd=REPO,
     )
     assert proc.returncode == 2 and "--seed, --composed: pick one" in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "realism", "in_hand", "tracked", "warned"),
+    [
+        ([], "default", "wrist", False, False),
+        (["--protocol", "oracle-sensing"], "clean", "exact", True, False),
+        (["--protocol", "previous"], "clean", "exact", True, True),  # its old name
+        (["--protocol", "oracle-sensing", "--realism", "harsh"], "harsh", "exact", True, False),
+    ],
+)
+def test_the_protocol_options_name_what_the_robot_senses(
+    argv, realism, in_hand, tracked, warned, capsys
+):
+    from rivet.cli import build_parser
+    from rivet.commands.eval import protocol_of
+
+    protocol = protocol_of(build_parser().parse_args(["eval", "cubes", *argv]))
+    assert (protocol.realism, protocol.in_hand, protocol.track_objects) == (
+        realism,
+        in_hand,
+        tracked,
+    )
+    assert ("now --protocol oracle-sensing" in capsys.readouterr().err) == warned
