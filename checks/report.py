@@ -470,11 +470,3 @@ def images_of(report: Mapping[str, Any]) -> list[str]:
     """Paths of every image a report refers to, failing checks first."""
     checks = sorted(report["checks"], key=passes)
     return [i["path"] for c in checks for i in c.get("images", [])]
-
-
-def array_digest(a: np.ndarray) -> str:
-    """A short content hash of an array (shape, dtype and bytes)."""
-    a = np.ascontiguousarray(a)
-    h = hashlib.sha256(f"{a.shape}{a.dtype}".encode())
-    h.update(a.tobytes())
-    return h.hexdigest()[:16]

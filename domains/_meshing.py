@@ -7,7 +7,6 @@ surface (not two touching solids) so the mesh stays a single watertight volume.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -18,17 +17,6 @@ def polygon_area(poly: np.ndarray) -> float:
     """Signed area [m²] of a 2D polygon (positive when counter-clockwise)."""
     x, y = np.asarray(poly, float).T
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
-
-
-def polygon_centroid(poly: np.ndarray) -> np.ndarray:
-    """Area centroid (2,) of a simple polygon."""
-    p = np.asarray(poly, float)
-    q = np.roll(p, -1, axis=0)
-    cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
-    a = cross.sum() / 2
-    return np.array([((p[:, 0] + q[:, 0]) * cross).sum(), ((p[:, 1] + q[:, 1]) * cross).sum()]) / (
-        6 * a
-    )
 
 
 def offset_convex(poly: np.ndarray, d: float) -> np.ndarray:
@@ -194,8 +182,3 @@ def load(path: Path) -> trimesh.Trimesh:
         elif line.startswith("f "):
             faces.append([int(v.split("/")[0]) - 1 for v in line.split()[1:4]])
     return trimesh.Trimesh(vertices=np.array(verts), faces=np.array(faces), process=False)
-
-
-def union_check(parts: Sequence[trimesh.Trimesh], mesh: trimesh.Trimesh) -> float:
-    """Volume difference [m³] between a mesh and the sum of its (disjoint) convex parts."""
-    return abs(sum(p.volume for p in parts) - mesh.volume)

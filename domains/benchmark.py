@@ -20,11 +20,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from domains.instance import Instance
-
 if TYPE_CHECKING:
-    from domains.base import Domain
-    from domains.generation import PhysicsCheck
+    pass
 
 BENCHMARK_GOALS = 20
 BENCHMARK_STARTS = 3
@@ -57,26 +54,9 @@ def benchmark_name(goal: int, start: int, split: str = "dev") -> str:
     return name if check_split(split) == "dev" else f"{split}/{name}"
 
 
-_NAME = re.compile(r"^goal(\d\d)_start(\d)$")
-
-
-def parse_benchmark_name(name: str) -> tuple[int, int] | None:
-    """(goal, start) of a dev name like ``goal01_start2``, else None."""
-    m = _NAME.match(name)
-    return (int(m.group(1)), int(m.group(2))) if m else None
-
-
 def benchmark_keys() -> list[tuple[int, int]]:
     """(goal, start) of every benchmark instance, goal-major."""
     return [(g, s) for g in range(1, BENCHMARK_GOALS + 1) for s in range(1, BENCHMARK_STARTS + 1)]
-
-
-def regenerate(domain: Domain, physics: PhysicsCheck | None, split: str = "dev") -> list[Instance]:
-    """Every benchmark instance of `split` drawn again (`physics`: see `Domain.generate`)."""
-    return [
-        domain.benchmark_instance(g, s, physics=physics, grasps=True, split=split)
-        for g, s in benchmark_keys()
-    ]
 
 
 def same(a: dict, b: dict, atol: float = 1e-7) -> bool:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import os
 import statistics
 import sys
 from collections import Counter
@@ -264,10 +263,6 @@ def table(summary: dict) -> str:
 def write_json(summary: dict, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(summary, indent=1) + "\n")
-
-
-def default_workers() -> int:
-    return max(1, min(4, (os.cpu_count() or 1)))
 
 
 def progress_bar(total: int, desc: str):
