@@ -102,7 +102,7 @@ def domain_facts(domain) -> str:
 def function_rules(domain) -> dict[str, str]:
     """Per function, the rule of every check its drafts get (the domain's properties
     included), as a Markdown list."""
-    from checks.rules import rules_for
+    from checks.rulebook import rules_for
     from contracts.functions import FUNCTIONS
 
     return {

@@ -228,38 +228,6 @@ def state(rule: Rule, *, domain: Any = None, params: Mapping[str, Any] | None = 
     return Stated(check=name or rule.check, text=" ".join(text.split()), numbers=numbers)
 
 
-def rules_for(domain: Any, function: str) -> list[Stated]:
-    """Every rule a draft of `function` is checked for in `domain`, in report order: the
-    interface checks, the function's suite (schema, properties, images) and the domain
-    properties the domain declares for it.
-
-    Raises:
-        RuleError: a check the suite runs has no rule (a bug of the checks).
-    """
-    from checks import properties, suites
-
-    out = [state(r, domain=domain) for r in suites.interface_rules(function)]
-    out += [state(r, domain=domain) for r in suites.RULES[function]]
-    for prop in properties.properties_for(domain, function):
-        rule = getattr(prop.fn, "rule", None)
-        if not rule:
-            raise RuleError(
-                f"domain property {prop.name!r} has no rule: give it @_register(rule=...) in "
-                "checks/properties/library.py"
-            )
-        out.append(
-            state(Rule(check=prop.name, text=rule), domain=domain, params=prop.params,
-                  name=prop.check_name)
-        )  # fmt: skip
-    order = ("interface", "schema", "property", "domain", "image")
-    return sorted(out, key=lambda s: order.index(s.check.split(".")[0]))
-
-
-def rule_map(domain: Any, function: str) -> dict[str, Stated]:
-    """`rules_for` by check name."""
-    return {s.check: s for s in rules_for(domain, function)}
-
-
 __all__ = [
     "Number",
     "Rule",
@@ -268,8 +236,6 @@ __all__ = [
     "number_text",
     "render",
     "resolve",
-    "rule_map",
-    "rules_for",
     "scaled",
     "show",
     "state",

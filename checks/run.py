@@ -38,7 +38,7 @@ from checks.context import (
 from checks.inputs import build_cases, fresh_seed
 from checks.report import CheckResult, build_report
 from checks.robot import RobotView
-from checks.rules import rule_map
+from checks.rulebook import rule_map
 from checks.suites import perceive as perceive_suite
 from checks.suites import render as render_suite
 from checks.suites.plan import Unrelated

@@ -29,7 +29,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import sandbox
 from sandbox._session import Channel, ChannelClosed, HarnessExecutor, minimal_env
 from sandbox.errors import SandboxUnavailable
 
@@ -119,7 +118,7 @@ class LocalExecutor(HarnessExecutor):
         if not self.quiet:
             print(WARNING, file=sys.stderr)
         hide_own_environment()
-        root = str(Path(sandbox.__file__).resolve().parent.parent)
+        root = str(Path(__file__).resolve().parents[1])  # the folder holding `sandbox/`
         env = minimal_env({"PYTHONPATH": root, "PATH": os.environ.get("PATH", "/usr/bin:/bin")})
         cmd = [sys.executable, "-m", "sandbox.harness.server", "--local", "--tmp", str(self._tmp)]
         try:

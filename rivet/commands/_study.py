@@ -21,7 +21,7 @@ PAPER_PAIRS = 6  # the paper's study: 10 runs × 6 pairs
 def run_study_command(args: argparse.Namespace) -> int:
     import domains
     from artifacts.policy import find_runs
-    from rivet.commands.eval import _instances, _policy, cameras_of, protocol_of
+    from rivet.commands._trials import _instances, _policy, cameras_of, protocol_of
     from sim.evaluation import EvalConfig, progress_bar, write_json
     from sim.reliability import StudyRun, run_study, study_table
 

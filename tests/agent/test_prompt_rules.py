@@ -22,7 +22,8 @@ import domains
 from agent.context import build_context, domain_facts
 from agent.prompt import build_request, template
 from checks import properties
-from checks.rules import OPTIONAL, PLACEHOLDER, Stated, render, rules_for
+from checks.rulebook import rules_for
+from checks.rules import OPTIONAL, PLACEHOLDER, Stated, render
 from checks.suites import RULES, interface_rules
 from contracts.functions import CODE_DEPS, CONTRACT_DEPS, FUNCTIONS, authoring_order
 
@@ -218,7 +219,7 @@ def test_a_declared_property_without_a_rule_is_refused(monkeypatch):
 
 
 def test_sizes_are_printed(capsys):
-    from agent.prompt import _main
+    from agent.prompt_sizes import _main
 
     assert _main(["--sizes", "--domain", "cubes", "--no-images"]) == 0
     out = capsys.readouterr().out

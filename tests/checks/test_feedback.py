@@ -22,7 +22,7 @@ from checks import build_report, report_markdown
 from checks.budget import DEFAULT, Budget
 from checks.calls import CallResult
 from checks.context import DomainSpec, SuiteContext
-from checks.rules import rule_map
+from checks.rulebook import rule_map
 from contracts import validate
 from geometry import yaw_pose
 

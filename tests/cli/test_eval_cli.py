@@ -78,7 +78,7 @@ def test_composed_goals_run_as_instances_and_a_domain_without_a_composer_is_refu
     composer exits 2 saying so, and so does `--composed` beside `--seed`."""
     assert _one_oracle_trial(tmp_path, "--composed", "2000") == ["composed/seed2000"]
     from contracts.errors import UsageError
-    from rivet.commands.eval import _composed
+    from rivet.commands._trials import _composed
 
     class Plain:  # a user's domain that composes nothing (`Domain.compose` as inherited)
         name = "plain"
@@ -111,7 +111,7 @@ def test_the_protocol_options_name_what_the_robot_senses(
     argv, realism, in_hand, tracked, warned, capsys
 ):
     from rivet.cli import build_parser
-    from rivet.commands.eval import protocol_of
+    from rivet.commands._trials import protocol_of
 
     protocol = protocol_of(build_parser().parse_args(["eval", "cubes", *argv]))
     assert (protocol.realism, protocol.in_hand, protocol.track_objects) == (
