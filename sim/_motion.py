@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -68,6 +69,26 @@ class PlannedSegment:
     segment: Segment
     q: np.ndarray  # (n, 7) joint targets, one per control tick
     grip: np.ndarray | None  # (n,) gripper control per tick
+
+
+def split_at(segments: Sequence[PlannedSegment], *labels: str) -> list[list[PlannedSegment]]:
+    """`segments` cut before the segment of each label, in order: len(labels) + 1 runs (the
+    first may be empty). The executor runs a transfer's phases by these labels, not by their
+    positions in the list.
+
+    Raises:
+        ValueError: a label is missing, or out of order.
+    """
+    names = [s.segment.label for s in segments]
+    cuts, start = [], 0
+    for label in labels:
+        try:
+            start = names.index(label, start)
+        except ValueError:
+            raise ValueError(f"no segment {label!r} after position {start} in {names}") from None
+        cuts.append(start)
+    bounds = [0, *cuts, len(segments)]
+    return [list(segments[i:j]) for i, j in pairwise(bounds)]
 
 
 @dataclass(frozen=True, kw_only=True)

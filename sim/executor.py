@@ -37,7 +37,7 @@ from contracts.errors import UsageError
 from contracts.limits import clip
 from geometry.hand import Grasp
 from sim import robot
-from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments
+from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments, split_at
 from sim.execution import (
     ExecutionResult,
     ExecutorConfig,
@@ -48,7 +48,17 @@ from sim.execution import (
 )
 from sim.ik import ArmIK
 from sim.sensing import Sensors
-from sim.transfer import TransferAbort, TransferPlanner, obstacles
+from sim.transfer import (
+    CLOSING,
+    DESCENDING,
+    LIFTING,
+    REACHING,
+    RETREATING,
+    SETTLING,
+    TransferAbort,
+    TransferPlanner,
+    obstacles,
+)
 
 __all__ = [
     "ExecutionResult",
@@ -239,13 +249,14 @@ class Executor:
             except TransferAbort as abort:
                 raise _StepAbort(abort.kind, abort.phase, abort.reason, abort.grasp) from None  # type: ignore[arg-type]
             grasp, transfer_z = chosen.grasp, chosen.transfer_z
-            self._run_phase("approach", chosen.pick[:-3])
+            approach, close, lift = split_at(chosen.pick, CLOSING, LIFTING)
+            self._run_phase("approach", approach)
             self._mark("close")
             if weld is not None:
                 weld.hold(oid)
-            self._run(chosen.pick[-3:-1])
+            self._run(close)
             self._check_hold(grasp, "close")
-            self._run_phase("lift", chosen.pick[-1:])
+            self._run_phase("lift", lift)
             self._check_hold(grasp, "lift")
             self._settle(self.config.measure_settle)
             T_place = target @ self.symmetries[oid][grasp.symmetry]
@@ -257,25 +268,32 @@ class Executor:
                 long_way=chosen.long_way,
                 transfer_q=chosen.transfer_q,
             )
-            self._run_phase("transfer", place[:1])
+            transfer = _place_phases(place)[0]
+            self._run_phase("transfer", transfer)
             self._settle(self.config.measure_settle)
             self._check_hold(grasp, "transfer", dropped=True)
             in_hand = self._in_hand(oid, grasp)
             if in_hand is not None:  # again, for any slip during the transfer
-                place = place[:1] + self._place(grasp, T_place, transfer_z, oid, skip=1)
-            self._run_phase("place", place[1:2])
+                place = transfer + self._place(grasp, T_place, transfer_z, oid, start=DESCENDING)
+            descend = _place_phases(place)[1]
+            self._run_phase("place", descend)
             if in_hand is not None:
                 # and once more before the last slow centimetres: the descent sways the object
                 # in the hand and the arm off its path by up to a millimetre, and tangram
                 # pieces go into gaps of half a millimetre
                 self._settle(self.config.near_settle)
-                place = place[:2] + self._place(grasp, T_place, transfer_z, oid, skip=2)
-            self._run(place[2:3])
+                place = (
+                    transfer
+                    + descend
+                    + self._place(grasp, T_place, transfer_z, oid, start=REACHING)
+                )
+            _, _, reach, release, retreat = _place_phases(place)
+            self._run(reach)
             self._mark("release")
-            self._run(place[3:6])
+            self._run(release)
             if weld is not None:
                 weld.hold(None)
-            self._run(place[6:])
+            self._run(retreat)
         except _StepAbort as abort:
             if weld is not None:
                 weld.hold(None)
@@ -353,7 +371,7 @@ class Executor:
         z: float,
         oid: str,
         *,
-        skip: int = 0,
+        start: str | None = None,
         long_way: bool = False,
         transfer_q: np.ndarray | None = None,
     ) -> list[PlannedSegment]:
@@ -364,7 +382,7 @@ class Executor:
                 T_place,
                 z,
                 in_hand=self._in_hand(oid, grasp),
-                skip=skip,
+                start=start,
                 long_way=long_way,
                 transfer_q=transfer_q,
             )
@@ -513,3 +531,9 @@ def _plan_steps(plan: Any) -> list[tuple[str, Any]]:
         else:
             raise UsageError(f"plan step {k} is not a step: {clip(repr(s))}")
     return out
+
+
+def _place_phases(place: list[PlannedSegment]) -> list[list[PlannedSegment]]:
+    """A place's phases by their labels: transfer, descent, final reach, release (settle,
+    open, settle), retreat."""
+    return split_at(place, DESCENDING, REACHING, SETTLING, RETREATING)

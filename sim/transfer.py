@@ -22,6 +22,15 @@ from sim.execution import ExecutorConfig
 from sim.ik import ArmIK
 from sim.reach import Reach
 
+# The labels of a transfer's segments that the executor cuts its phases at (`split_at`).
+CLOSING = "closing"
+LIFTING = "lifting"
+TRANSFERRING = "transferring"
+DESCENDING = "descending to the target"
+REACHING = "reaching the target"
+SETTLING = "settling before release"
+RETREATING = "retreating"
+
 
 class TransferAbort(Exception):
     """A transfer cannot be planned: (kind, phase, reason), as `StepFailure` has them."""
@@ -261,8 +270,8 @@ class TransferPlanner:
     def pick_segments(
         self, q_cmd: np.ndarray, grip_cmd: float, grasp: Grasp, z: float
     ) -> list[Segment]:
-        """Approach (rise, move above, descend, reach), then close, squeeze, lift: the last
-        three segments are always close, squeeze, lift."""
+        """Approach (rise, move above, descend, reach), then close, squeeze, lift (labelled
+        `CLOSING`, then `LIFTING`)."""
         c = self.config
         open_ctrl = STROKE.ctrl_for_gap(grasp.open_gap)
         T_now = self.ik.fk(q_cmd)
@@ -307,10 +316,10 @@ class TransferPlanner:
                 goal=grasp.pick_tcp,
                 duration=max(c.final_approach / c.final_speed, 0.2),
             ),
-            Segment(label="closing", duration=c.close_time, grip=(open_ctrl, robot.GRIPPER_CLOSED)),
+            Segment(label=CLOSING, duration=c.close_time, grip=(open_ctrl, robot.GRIPPER_CLOSED)),
             Segment(label="squeezing", duration=c.grip_settle),
             Segment(
-                label="lifting",
+                label=LIFTING,
                 goal=above,
                 duration=self.duration(grasp.pick_tcp, above, c.approach_speed),
             ),
@@ -341,26 +350,26 @@ class TransferPlanner:
             turn -= np.copysign(2 * np.pi, turn)
         return [
             Segment(
-                label="transferring",
+                label=TRANSFERRING,
                 goal=above,
                 duration=max(self.duration(lifted, above, c.move_speed), abs(turn) / c.turn_speed),
                 turn=turn,
             ),
             Segment(
-                label="descending to the target",
+                label=DESCENDING,
                 goal=near,
                 duration=self.duration(above, near, c.approach_speed),
             ),
             Segment(
-                label="reaching the target",
+                label=REACHING,
                 goal=release,
                 duration=max(c.final_approach / c.final_speed, 0.2),
             ),
-            Segment(label="settling before release", duration=c.release_settle),
+            Segment(label=SETTLING, duration=c.release_settle),
             Segment(label="opening", duration=c.open_time, grip=(robot.GRIPPER_CLOSED, open_ctrl)),
             Segment(label="settling after release", duration=c.release_settle),
             Segment(
-                label="retreating",
+                label=RETREATING,
                 goal=above,
                 duration=self.duration(release, above, c.approach_speed),
             ),
@@ -374,14 +383,14 @@ class TransferPlanner:
         z: float,
         *,
         in_hand: np.ndarray | None = None,
-        skip: int = 0,
+        start: str | None = None,
         long_way: bool = False,
         transfer_q: np.ndarray | None = None,
     ) -> list[PlannedSegment]:
         """Plan the place from the arm's command `q_cmd`, corrected for the object's pose in the
         hand when there is an estimate of it (`in_hand`: T_tcp_object): from after the lift, or
-        with `skip` 1 from above the target, 2 from the end of the descent (`final_approach`
-        above the release). `T_place` is the target with the grasp's symmetry applied; the
+        from the segment labelled `start` (`DESCENDING`: from above the target; `REACHING`:
+        from the end of the descent, `final_approach` above the release). `T_place` is the target with the grasp's symmetry applied; the
         transfer turns the long way round with `long_way`, or is a joint move to `transfer_q`
         (as `choose` chose)."""
         candidates = []
@@ -394,9 +403,10 @@ class TransferPlanner:
         failure: PlanFailure | None = None
         for place_tcp in candidates:
             motion = self.place_motion(grasp, place_tcp, z, long_way)
-            if transfer_q is not None and skip == 0:
+            if transfer_q is not None and start is None:
                 motion[0] = self._joint_segment(q_cmd, transfer_q, motion[0])
-            planned = plan_segments(self.ik, q_cmd, motion[skip:], self.tick_dt)
+            first = 0 if start is None else [m.label for m in motion].index(start)
+            planned = plan_segments(self.ik, q_cmd, motion[first:], self.tick_dt)
             if not isinstance(planned, PlanFailure):
                 return planned
             failure = failure or planned

@@ -99,7 +99,16 @@ def permissive_executor(sandbox_image):
 
 def test_ipc_left_behind_is_removed_and_its_memory_freed(permissive_executor):
     ex = permissive_executor
-    left = ex.run(Job(source=LEAVE_IPC, function="f", inputs={"shm_bytes": 1 << 30}, timeout_s=60))
+    # shared memory counts against the job's limit: 1 GiB of it needs more than the default
+    left = ex.run(
+        Job(
+            source=LEAVE_IPC,
+            function="f",
+            inputs={"shm_bytes": 1 << 30},
+            timeout_s=60,
+            memory_mb=1536,
+        )
+    )
     assert left.output == dict.fromkeys(("shmget", "msgget", "semget", "mq_open"), "created"), left
     restarts = ex.restarts
     seen = ex.run(Job(source=IPC_SEEN, function="f"))
