@@ -74,10 +74,6 @@ def to_jsonable(value: Any) -> Any:
     return value
 
 
-def schema_path(kind: str) -> Any:
-    return resources.files("contracts") / "schemas" / f"{kind}.schema.json"
-
-
 @cache
 def _validator(kind: str) -> Draft202012Validator:
     base = resources.files("contracts") / "schemas"
