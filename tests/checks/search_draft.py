@@ -207,9 +207,16 @@ def _proc(dump: Dump) -> None:
 
 
 def _memory(dump: Dump) -> None:
-    """Its own heap, stack and anonymous maps (what it inherited and what it holds)."""
+    """Its own heap, stack and anonymous maps (what it inherited and what it holds), read
+    through /proc/self/mem where it can be opened: the list of maps goes stale while the scan
+    allocates and frees (a large buffer is its own map, unmapped when freed), and reading a
+    map that is gone is an error there, not a segmentation fault."""
     with open("/proc/self/maps") as f:
         regions = [line.split() for line in f]
+    try:
+        mem = open("/proc/self/mem", "rb", buffering=0)  # noqa: SIM115
+    except OSError:
+        mem = None
     for fields in regions:
         lo, hi = (int(x, 16) for x in fields[0].split("-"))
         path = fields[5] if len(fields) > 5 else ""
@@ -218,9 +225,18 @@ def _memory(dump: Dump) -> None:
         ):
             continue
         for start in range(lo, hi, CHUNK):
-            data = ctypes.string_at(start, min(hi, start + CHUNK + 256) - start)
+            size = min(hi, start + CHUNK + 256) - start
+            if mem is None:
+                data = ctypes.string_at(start, size)
+            else:
+                try:
+                    data = os.pread(mem.fileno(), size, start)
+                except OSError:  # unmapped since the list was read
+                    break
             dump.stats["memory_bytes"] += len(data)
             dump.scan(data)
+    if mem is not None:
+        mem.close()
 
 
 def perceive(observation, meshes, camera):
