@@ -10,7 +10,7 @@ export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 export MENAGERIE_ROOT ?= $(abspath ../shared/menagerie)
 
-.PHONY: help venv system test lint author eval bench bench-checks sandbox-base sandbox-image format
+.PHONY: help venv system test lint author eval bench bench-checks sandbox-base sandbox-image format refreeze refreeze-check
 
 help: ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN{FS=":.*## "}{printf "  make %-14s %s\n", $$1, $$2}'
@@ -43,6 +43,12 @@ format: venv ## apply ruff's formatting and safe fixes
 
 author: venv system sandbox-image ## author DOMAIN's programs: replays its reference transcript, or uses MODEL when ANTHROPIC_API_KEY is set
 	.venv/bin/rivet author $(DOMAIN) $(if $(ANTHROPIC_API_KEY),--model $(MODEL))
+
+refreeze: venv system sandbox-image ## rebuild the transcripts and frozen sets from domains/*/programs (or DOMAIN=…)
+	.venv/bin/rivet refreeze $(if $(filter command line environment,$(origin DOMAIN)),$(DOMAIN))
+
+refreeze-check: venv ## exit 1 where a committed transcript or frozen set is not what its programs make
+	.venv/bin/rivet refreeze --check
 
 POLICY ?= artifacts
 WORKERS ?= 2

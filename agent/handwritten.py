@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Any
 
 from agent.clients.base import Author, ModelRequest
 from agent.clients.replay import RecordingClient
@@ -84,3 +85,56 @@ def check_sequence_used(folder: Path, history) -> None:
                 f"{function}: expected the drafts to fail and the final version to pass "
                 f"({labels}); got attempts {used} — a draft that passes is not a failing draft"
             )
+
+
+def derivation_problems(domain: Any, artifacts_root: Path | None = None) -> list[str]:
+    """Where `domain`'s committed transcript and frozen set are not what its people-written
+    programs (`domains/<d>/programs/`, the only hand-edited source) produce: each problem in a
+    line, [] when they are. Reads files only (no check runs): the transcript's answers are the
+    programs (drafts, then the final version), the frozen files are the final versions, and
+    the manifest was stamped against this checkout's contracts, toolbox and prompt templates.
+    `make refreeze` (pack, then author) makes them so."""
+    from agent.extract import extract_draft
+    from agent.prompt import templates_hash
+    from agent.transcript import Transcript
+    from artifacts.errors import ArtifactError
+    from artifacts.hashing import changed_since_checked
+    from artifacts.store import verify
+
+    folder = domain.root / "programs"
+    if not folder.is_dir():
+        return []  # a domain without people-written programs derives nothing
+    problems: list[str] = []
+    sequence = program_sequence(folder)
+    try:
+        transcript = Transcript.load(domain.reference_transcript)
+    except Exception as e:  # a missing or unreadable transcript
+        return [f"{domain.name}: the reference transcript cannot be read: {e}"]
+    if transcript.written_by.kind != "people":
+        problems.append(f"{domain.name}: the reference transcript is not labelled as people's")
+    for function, seq in sequence.items():
+        entries = sorted(
+            (e for e in transcript.entries if e.function == function), key=lambda e: e.attempt
+        )
+        answers = [extract_draft(transcript.texts[e.file], function) for e in entries]
+        wanted = [source for _, source in seq]
+        if [a.rstrip() for a in answers] != [w.rstrip() for w in wanted]:
+            labels = ", ".join(label for label, _ in seq)
+            problems.append(
+                f"{domain.name}: the transcript's {function} answers are not {labels} "
+                f"({len(answers)} answers for {len(wanted)} files, or a file changed)"
+            )
+    try:
+        manifest, sources = verify(domain.name, artifacts_root)
+    except ArtifactError as e:
+        return [*problems, f"{domain.name}: {e}"]
+    for function, seq in sequence.items():
+        if sources[function].rstrip() != seq[-1][1].rstrip():
+            problems.append(
+                f"{domain.name}: the frozen {function}.py is not programs/{function}.py"
+            )
+    if stale := changed_since_checked(manifest):
+        problems.append(f"{domain.name}: the set was checked against other {', '.join(stale)}")
+    if manifest.get("prompt_hash") != templates_hash():
+        problems.append(f"{domain.name}: the set was authored from other prompt templates")
+    return problems

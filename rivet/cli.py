@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "validate",
     "toolbox",
     "transcript",
+    "refreeze",
 )
 
 
