@@ -41,7 +41,7 @@ def _ik_model() -> mujoco.MjModel:
 class IKSolution:
     """Result of `ArmIK.solve`."""
 
-    q: np.ndarray  # (7,) arm joints [rad]
+    q: np.ndarray  # (n_arm,) arm joints [rad]
     position_error: float  # [m]
     rotation_error: float  # [rad]
 
@@ -53,7 +53,7 @@ class IKSolution:
 class ArmIK:
     """mink differential IK for the FR3's TCP.
 
-    The posture task leaves the wrist (joint 7) alone. With the gripper pointing down, the
+    The posture task leaves the wrist (the arm's last joint) alone. With the gripper pointing down, the
     wrist's angle follows from the grasp's yaw and the other joints; a posture pull on it, when
     a grasp or a long transfer has turned it far from READY's, moves the arm along its
     self-motion instead, on every tick of a Cartesian move whose frame task it does not
@@ -62,7 +62,8 @@ class ArmIK:
     dev draws 60337 and 61253, `benchmarks.transfer_sweep`).
 
     Args:
-        posture_cost: weight of the posture task on joints 1–6 relative to the frame task.
+        posture_cost: weight of the posture task on the joints before the wrist, relative to
+            the frame task.
         limit_margin: distance kept from the joint limits [rad].
     """
 
@@ -78,7 +79,7 @@ class ArmIK:
             robot.TCP_SITE, "site", position_cost=1.0, orientation_cost=0.5, lm_damping=1e-6
         )
         cost = np.zeros(model.nv)
-        cost[self._arm_dof[:6]] = posture_cost
+        cost[self._arm_dof[:-1]] = posture_cost  # every arm joint but the wrist
         self.posture_task = mink.PostureTask(model, cost=cost)
         q_ready = np.zeros(model.nq)
         q_ready[self._arm_qpos] = robot.READY_QPOS
@@ -102,7 +103,7 @@ class ArmIK:
         self.configuration.update(self._q)
 
     def fk(self, q_arm: np.ndarray) -> np.ndarray:
-        """TCP pose (4, 4) in the world at arm joints `q_arm` (7,) [rad]."""
+        """TCP pose (4, 4) in the world at arm joints `q_arm` (n_arm,) [rad]."""
         self._set(np.asarray(q_arm, dtype=float))
         return self._tcp_pose()
 
@@ -145,15 +146,15 @@ class ArmIK:
         """Follow a path of TCP poses, one IK step of `dt` [s] per pose.
 
         Args:
-            q_arm: start joints (7,) [rad].
+            q_arm: start joints (n_arm,) [rad].
             path: TCP targets (n, 4, 4), one per tick.
 
         Returns:
-            joints (n, 7) after each tick and the tracking errors (n, 2): position [m],
+            joints (n, n_arm) after each tick and the tracking errors (n, 2): position [m],
             rotation [rad] of the TCP from its target after each tick.
         """
         self._set(np.asarray(q_arm, dtype=float))
-        qs = np.empty((len(path), 7))
+        qs = np.empty((len(path), len(self._arm_qpos)))
         errs = np.empty((len(path), 2))
         for i, target in enumerate(path):
             qs[i] = self._step(target, dt)
