@@ -35,7 +35,7 @@ import numpy as np
 
 import domains
 
-DOMAINS = ("cubes", "tangram", "assembly")
+DOMAINS = domains.names()
 
 
 def perturb(records: list[dict], meshes: dict, rng: np.random.Generator, args) -> list[dict]:

@@ -28,7 +28,7 @@ from checks.suites import RULES, interface_rules
 from contracts.functions import CODE_DEPS, CONTRACT_DEPS, FUNCTIONS, authoring_order
 
 REPO = Path(__file__).resolve().parents[2]
-DOMAINS = ("cubes", "tangram", "assembly")
+DOMAINS = domains.names()
 CHECK_NAME = re.compile(r"^(interface|schema|property|image)\.[a-z_]+$")
 
 # Where a stated number may come from: the constants the checks, the scoring, the executor's

@@ -127,7 +127,7 @@ def test_failing_feedback_never_identifies_a_later_attempts_case(executor, tmp_p
 
 
 @pytest.mark.parametrize("kind", ["floating", "overlap", "unsupported", "outside"])
-@pytest.mark.parametrize("name", ["cubes", "tangram", "assembly"])
+@pytest.mark.parametrize("name", domains.names())
 def test_drawn_infeasible_goals_are_what_they_claim(name, kind):
     """Each kind of unreachable goal is drawn with varying amounts and partners, and the oracle
     geometry confirms what it claims (`infeasible_goal`)."""

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import domains
 from checks import raster, report_markdown
 from checks.suites import render as render_suite
 
@@ -122,7 +123,7 @@ def test_outline_of_a_mirrored_or_scaled_silhouette_strays():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("domain", ["cubes", "tangram", "assembly"])
+@pytest.mark.parametrize("domain", domains.names())
 def test_the_obvious_two_pass_pyrender_renderer_passes(check_render, domain):
     report = check_render(domain, (DRAFTS / "render_two_pass.py").read_text())
     assert report["passed"], report_markdown(report)

@@ -9,7 +9,7 @@ import pytest
 import domains
 
 
-@pytest.mark.parametrize("name", ["cubes", "tangram", "assembly"])
+@pytest.mark.parametrize("name", domains.names())
 def test_composed_instances_carry_an_executable_order(name):
     """`Domain.composed_instance`: the plan checks' composed goals come with an order the
     robot's hand model accepts step by step."""

@@ -24,7 +24,7 @@ from geometry import bodies_of, yaw_of
 from geometry import resting_on as supports
 from sim.settle import check_order
 
-NAMES = ("cubes", "tangram", "assembly")
+NAMES = domains.names()
 
 
 @pytest.fixture(scope="module", params=NAMES)

@@ -84,7 +84,7 @@ def assembly() -> Scene:
     return Scene("assembly", 3)
 
 
-@pytest.fixture(scope="module", params=["cubes", "tangram", "assembly"])
+@pytest.fixture(scope="module", params=domains.names())
 def scene(request) -> Scene:
     return Scene(request.param, 5)
 
