@@ -34,7 +34,7 @@ test: venv system sandbox-image ## run the whole test suite (unit, property, san
 lint: venv ## ruff (lint + format check), mypy and the import layering (import-linter)
 	.venv/bin/ruff check .
 	.venv/bin/ruff format --check .
-	.venv/bin/mypy contracts geometry sandbox agent toolbox domains sim checks artifacts rivet
+	.venv/bin/mypy contracts geometry sandbox agent toolbox domains sim checks artifacts experiments rivet
 	.venv/bin/lint-imports  # the layering, pyproject.toml [tool.importlinter]
 
 format: venv ## apply ruff's formatting and safe fixes

@@ -11,7 +11,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = (
-    "rivet", "agent", "artifacts", "checks", "sim", "sandbox", "domains", "toolbox",
+    "rivet", "agent", "experiments", "artifacts", "checks", "sim", "sandbox", "domains", "toolbox",
     "geometry", "contracts", "benchmarks",
 )  # fmt: skip
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("rivet", "agent", "artifacts", "checks", "sim", "sandbox", "domains", "toolbox",
+PACKAGES = ("rivet", "agent", "experiments", "artifacts", "checks", "sim", "sandbox", "domains", "toolbox",
             "geometry", "contracts")  # fmt: skip
 LINT = Path(sys.executable).parent / "lint-imports"
 

@@ -4,7 +4,7 @@ Each authoring run under RUNS_DIR (`rivet author DOMAIN --runs N --runs-dir RUNS
 final programs evaluated — in a sandbox session of their own, policy `run RUN_DIR` — on the
 first K start/goal pairs of `--split` (start-major order, as `--trials` takes them); runs that
 did not finish authoring are reported as failed runs. Prints the per-run and the pooled table
-(sim/reliability.py) and writes both with `--json OUT`. Exit 0 only when every run finished
+(experiments/reliability.py) and writes both with `--json OUT`. Exit 0 only when every run finished
 and solved every pair.
 """
 
@@ -21,9 +21,9 @@ PAPER_PAIRS = 6  # the paper's study: 10 runs × 6 pairs
 def run_study_command(args: argparse.Namespace) -> int:
     import domains
     from artifacts.policy import find_runs
+    from experiments.evaluation import EvalConfig, progress_bar, write_json
+    from experiments.reliability import StudyRun, run_study, study_table
     from rivet.commands._trials import _instances, _policy, cameras_of, protocol_of
-    from sim.evaluation import EvalConfig, progress_bar, write_json
-    from sim.reliability import StudyRun, run_study, study_table
 
     kind, runs_dir = _policy(args.policy)
     if kind != "runs":

@@ -118,7 +118,7 @@ def _author_on_ray(args: argparse.Namespace, domain: str, runs_root: Path) -> in
     """`--runs N --ray ADDRESS`: each run is one Ray task running `rivet author --runs 1` on a
     node (which needs the project, Docker and the sandbox image; the key, if any, comes from
     the node's own environment). `--max-usd X` gives each run X / N."""
-    from sim.scaleout import map_tasks
+    from experiments.scaleout import map_tasks
 
     source = (
         ["--model", args.model]

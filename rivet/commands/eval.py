@@ -5,7 +5,7 @@ Policies: `oracle` (ground truth + the generator's construction order: the execu
 `programs DIR` (render/perceive/relate/plan .py files in DIR), `artifacts` (the frozen,
 hash-checked programs of artifacts/DOMAIN), `runs RUNS_DIR` (a reliability study: each
 authoring run's final programs under RUNS_DIR on the first `--pairs K` pairs, per run and
-pooled; sim/reliability.py). Trials come from the fixed benchmark set
+pooled; experiments/reliability.py). Trials come from the fixed benchmark set
 (20 goals × 3 starts) unless `--seed`, `--composed` or `--instances` says otherwise.
 """
 
@@ -22,7 +22,7 @@ from rivet.commands._trials import VIEWS, _instances, _policy, cameras_of, proto
 
 def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: object) -> dict:
     import domains
-    from sim.evaluation import EvalConfig, progress_bar, run_eval, table
+    from experiments.evaluation import EvalConfig, progress_bar, run_eval, table
 
     domain = domains.load(domain_name)
     policy = _policy(args.policy)
@@ -61,7 +61,7 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
 
 def run(args: argparse.Namespace) -> int:
     import domains
-    from sim.evaluation import PAPER, write_json
+    from experiments.evaluation import PAPER, write_json
     from sim.trials import HONEST
 
     if _policy(args.policy)[0] == "runs" or args.pairs is not None:

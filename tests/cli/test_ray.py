@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import domains
-from sim.evaluation import EvalConfig, run_eval
+from experiments.evaluation import EvalConfig, run_eval
 from sim.settle import physical_problems
 
 ray = pytest.importorskip("ray")  # the optional extra; `make test` installs it

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import domains
-from sim.evaluation import EvalConfig, run_eval, table
+from experiments.evaluation import EvalConfig, run_eval, table
 from sim.settle import physical_problems
 from sim.trials import OraclePolicy, PolicyOutput, run_trial
 
@@ -91,7 +91,7 @@ def test_harness_goes_on_after_failures(cubes):
     _, instance = cubes
     bad = FixedPlan(BAD_PLANS["unknown_object"])
     config = EvalConfig(domain="cubes", policy=("oracle", None))
-    from sim import evaluation
+    from experiments import evaluation
 
     evaluation._init_worker(config)
     evaluation._WORKER["policy"] = bad

@@ -20,7 +20,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from sim.evaluation import EvalConfig, PolicySpec, run_eval
+from artifacts.policy import PolicySpec
+from experiments.evaluation import EvalConfig, run_eval
 
 METRICS = (("state", "state_ok"), ("plan", "plan_ok"), ("final", "final_ok"))
 
@@ -78,7 +79,7 @@ def run_study(
 def _close_in_process_policy() -> None:
     """End the sandbox session of the run just evaluated in this process (`workers=1`), so a
     study of N runs never holds N sessions; worker processes end theirs when they exit."""
-    from sim import evaluation
+    from experiments import evaluation
 
     policy = evaluation._WORKER.pop("policy", None)
     close = getattr(policy, "close", None)

@@ -6,7 +6,6 @@ nothing crosses process boundaries but instance names and JSON results.
 
 from __future__ import annotations
 
-import importlib
 import json
 import statistics
 import sys
@@ -19,12 +18,9 @@ from typing import Any
 
 import numpy as np
 
+from artifacts.policy import PolicySpec
+from artifacts.policy import make_policy as policy_of
 from sim.trials import HONEST, TrialProtocol
-
-PolicySpec = tuple[str, str | None]  # ("oracle" | "programs" | "artifacts", folder or None)
-POLICY_FACTORY = "artifacts.policy:make_policy"
-"""Who builds the policy in each worker (a path, so that the simulator never imports the
-runtime that sits above it)."""
 
 # The paper's figures (Table I: front camera; Table III: final success on two more viewpoints).
 PAPER = {
@@ -58,13 +54,10 @@ class EvalConfig:
     split: str = "dev"
     sandbox: str = "docker"
     record_root: str | None = None
-    policy_factory: str = POLICY_FACTORY
 
 
 def make_policy(config: EvalConfig) -> Any:
-    module, _, name = config.policy_factory.partition(":")
-    factory = getattr(importlib.import_module(module), name)
-    return factory(config.domain, config.policy, sandbox=config.sandbox)
+    return policy_of(config.domain, config.policy, sandbox=config.sandbox)
 
 
 _WORKER: dict[str, Any] = {}
@@ -124,12 +117,12 @@ def run_eval(
 ) -> dict:
     """Run every instance (JSON dicts) and summarise; results keep the instances' order.
 
-    `ray_address` fans the trials out to Ray actors (see `sim.scaleout`) instead of local
+    `ray_address` fans the trials out to Ray actors (see `experiments.scaleout`) instead of local
     processes.
     """
     results: dict[int, dict] = {}
     if ray_address is not None:
-        from sim.scaleout import map_with_actors
+        from experiments.scaleout import map_with_actors
 
         for i, result in map_with_actors(
             ray_address, _init_worker, config, _run_one, list(instances), workers=workers
