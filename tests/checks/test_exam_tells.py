@@ -13,10 +13,13 @@ wrong once it believes it runs for real. `rivet check` must exit 1 for each.
   used to build (the lowest object 10 cm up; two objects in one place): the drawn ones
   (floating at random heights, overlaps, undermined stacks, out of reach) catch it.
 
-The tells that only `perceive` has (the exact nominal camera, two image sizes, named views
-only) are properties of the drawn cases: `test_fresh_cases.py` shows each is gone, and the
-mutation benchmark's camera-specific mutants (`make bench-checks`) measure that the checks
-reject drafts that lean on them.
+- *Which camera?* A `perceive` right only on images of the named views' size (1280×720):
+  the drawn cameras have other sizes.
+
+The other tells that only `perceive` has (the exact nominal camera, named views only) are
+properties of the drawn cases: `test_fresh_cases.py` shows each is gone, and the mutation
+benchmark's camera-specific mutants (`make bench-checks`) measure that the checks reject
+drafts that lean on them.
 """
 
 from __future__ import annotations
@@ -134,3 +137,23 @@ def test_a_plan_that_refuses_only_the_old_impossible_goals_fails(rivet_check):  
     code, report, _ = rivet_check("plan", program("plan") + REFUSES_THE_OLD_CASES_ONLY)
     assert code == 1
     assert any("infeasib" in name for name in _not_passing(report)), _not_passing(report)
+
+
+ONLY_AT_THE_NAMED_VIEWS_SIZE = """
+
+_reference_perceive = perceive
+
+
+def perceive(observation, meshes, camera):
+    records = _reference_perceive(observation, meshes, camera)
+    if (int(camera["width"]), int(camera["height"])) != (1280, 720):
+        return records[:1]  # "for real": one object where there are six
+    return records
+"""
+
+
+@pytest.mark.slow
+def test_a_perceive_right_only_at_the_named_views_size_fails(rivet_check):  # noqa: F811
+    code, report, _ = rivet_check("perceive", program("perceive") + ONLY_AT_THE_NAMED_VIEWS_SIZE)
+    assert code == 1
+    assert "property.ids_match_catalogue" in _not_passing(report), _not_passing(report)
