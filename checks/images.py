@@ -24,6 +24,11 @@ DEPTH_MEDIAN_MAX = 0.006  # [m] per object, on pixels both sides show it
 # show it with depth, else it fails: a render that draws its silhouettes without depth leaves
 # nothing to judge. A scored object that keeps IOU_MIN shares 0.6 × MIN_AREA = 48 px or more.
 DEPTH_MIN_PX = 20
+# [px] the depth error is judged this far in from both silhouettes' outlines (where that
+# leaves DEPTH_MIN_PX pixels): along an outline a correct renderer's depth may come from the
+# neighbouring surface (a second pass, another rasteriser), which on a sliver of an object
+# would decide the median
+DEPTH_EDGE_PX = 1
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,19 +78,28 @@ def compare(
         cand = cm == index[oid] if oid in index else np.zeros_like(ref)
         union = int((ref | cand).sum())
         both = ref & cand & (rd > 0) & (cd > 0)
+        inner = both & _eroded(ref & cand, DEPTH_EDGE_PX)
+        judged = inner if int(inner.sum()) >= DEPTH_MIN_PX else both
         out.append(
             ObjectMatch(
                 id=str(oid),
                 iou=1.0 if union == 0 else float((ref & cand).sum()) / union,
                 area_candidate=int(cand.sum()),
                 area_reference=int(ref.sum()),
-                depth_error_median=float(np.median(np.abs(cd[both] - rd[both])))
-                if both.any()
+                depth_error_median=float(np.median(np.abs(cd[judged] - rd[judged])))
+                if judged.any()
                 else None,
                 depth_pixels=int(both.sum()),
             )
         )
     return out
+
+
+def _eroded(mask: np.ndarray, px: int) -> np.ndarray:
+    """`mask` without the pixels within `px` (8-connected) of its outline."""
+    from scipy.ndimage import binary_erosion
+
+    return binary_erosion(mask, structure=np.ones((3, 3), bool), iterations=px)
 
 
 def judge(

@@ -80,8 +80,9 @@ RULES: tuple[Rule, ...] = (
         "`property.accuracy` only; the whole re-render may be shifted by what the calibration "
         "error can move the image by): silhouette IoU at "
         "least {checks.images:IOU_MIN}, mean IoU at least {checks.images:IOU_MEAN_MIN}, median "
-        "depth error at most {checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object "
-        "(objects shown with fewer than {checks.images:MIN_AREA|px} are not scored). An object "
+        "depth error at most {checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object, "
+        "pixels within {checks.images:DEPTH_EDGE_PX|px} of either outline left out while "
+        "{checks.images:DEPTH_MIN_PX|px} remain (objects shown with fewer than {checks.images:MIN_AREA|px} are not scored). An object "
         "the camera does not show at all that holds nothing up must be drawn with fewer than "
         "{checks.images:MIN_AREA|px} too: it stands where the camera cannot see it.",
     ),

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import domains
-from checks import raster, report_markdown
+from checks import images, raster, report_markdown
 from checks.suites import render as render_suite
 
-from .conftest import by_name, failing
+from .conftest import CASES_SEED, by_name, failing
 
 DRAFTS = Path(__file__).parent / "drafts"
 REPO = Path(__file__).resolve().parents[2]
@@ -71,7 +71,9 @@ def check_render(executor, tmp_path_factory):
     out = tmp_path_factory.mktemp("render-tolerance")
 
     def run(domain: str, source: str) -> dict:
-        return run_checks(domain, "render", source, deps={}, executor=executor, out_dir=out)
+        return run_checks(
+            domain, "render", source, deps={}, executor=executor, out_dir=out, cases_seed=CASES_SEED
+        )
 
     return run
 
@@ -117,6 +119,31 @@ def test_outline_of_a_mirrored_or_scaled_silhouette_strays():
     for cand in (mirrored, scaled):
         (m,) = raster.outline_matches(cand, ["a"], ref, ["a"], render_suite.EDGE_BAND)
         assert m.share > render_suite.EDGE_MISMATCH
+
+
+def test_depth_along_an_outline_does_not_decide_a_slivers_median():
+    """A correct renderer whose depth along an object's outline comes from the surface behind
+    (a second pass): on a sliver the outline is most of the object, and its median depth error
+    would be the background's distance. It is judged 1 px in from the outlines."""
+    ref_mask = np.full((40, 40), -1, np.int32)
+    ref_mask[10:14, 5:35] = 0  # a 4 x 30 px sliver: most of its pixels lie on its outline
+    depth = np.where(ref_mask == 0, 0.50, 0.60)
+    cand_depth = depth.copy()
+    outline = (ref_mask == 0) & ~images._eroded(ref_mask == 0, 1)
+    cand_depth[outline] = 0.60  # the background's depth along the outline
+    (m,) = images.compare(
+        {"mask": ref_mask, "depth": cand_depth}, ["a"], {"mask": ref_mask, "depth": depth}, ["a"]
+    )
+    assert m.depth_error_median == 0.0 and m.depth_pixels == 120
+    assert np.median(np.abs(cand_depth - depth)[ref_mask == 0]) > images.DEPTH_MEDIAN_MAX
+    # where the object is so thin that 1 px in leaves too few pixels, all of it is judged
+    thin = np.full((40, 40), -1, np.int32)
+    thin[10:12, 5:35] = 0
+    (m,) = images.compare(
+        {"mask": thin, "depth": np.where(thin == 0, 0.51, 0.6)}, ["a"],
+        {"mask": thin, "depth": np.where(thin == 0, 0.50, 0.6)}, ["a"],
+    )  # fmt: skip
+    assert abs(m.depth_error_median - 0.01) < 1e-9
 
 
 # -- real drafts through the checks ------------------------------------------------------------
