@@ -206,33 +206,47 @@ def _proc(dump: Dump) -> None:
         dump.keep(f"{base}/links", json.dumps(links).encode())
 
 
-def _memory(dump: Dump) -> None:
-    """Its own heap, stack and anonymous maps (what it inherited and what it holds), read
-    through /proc/self/mem where it can be opened: the list of maps goes stale while the scan
-    allocates and frees (a large buffer is its own map, unmapped when freed), and reading a
-    map that is gone is an error there, not a segmentation fault."""
+def _maps() -> list[tuple[int, int, str, str]]:
+    """(start, end, permissions, path) of every map of this process, as it is now."""
+    out = []
     with open("/proc/self/maps") as f:
-        regions = [line.split() for line in f]
+        for line in f:
+            fields = line.split()
+            lo, hi = (int(x, 16) for x in fields[0].split("-"))
+            out.append((lo, hi, fields[1], fields[5] if len(fields) > 5 else ""))
+    return out
+
+
+def _readable_now(start: int, end: int) -> bool:
+    return any(lo <= start and end <= hi and perms.startswith("r") for lo, hi, perms, _ in _maps())
+
+
+def _memory(dump: Dump) -> None:
+    """Its own heap, stack and anonymous maps (what it inherited and what it holds). The scan
+    allocates and frees as it goes (a large buffer is a map of its own, unmapped when freed),
+    so the list of maps goes stale: each chunk is read only while the maps read just before it
+    still hold it — through /proc/self/mem where that can be opened (a map gone is then an
+    error), else with ctypes."""
     try:
         mem = open("/proc/self/mem", "rb", buffering=0)  # noqa: SIM115
-    except OSError:
+    except OSError:  # a process that is not dumpable cannot open it
         mem = None
-    for fields in regions:
-        lo, hi = (int(x, 16) for x in fields[0].split("-"))
-        path = fields[5] if len(fields) > 5 else ""
-        if not fields[1].startswith("r") or not (
+    for lo, hi, perms, path in _maps():
+        if not perms.startswith("r") or not (
             path == "" or path.startswith(("[heap]", "[stack]", "[anon"))
         ):
             continue
         for start in range(lo, hi, CHUNK):
-            size = min(hi, start + CHUNK + 256) - start
-            if mem is None:
-                data = ctypes.string_at(start, size)
-            else:
-                try:
-                    data = os.pread(mem.fileno(), size, start)
-                except OSError:  # unmapped since the list was read
-                    break
+            end = min(hi, start + CHUNK + 256)
+            if not _readable_now(start, end):
+                break  # unmapped or shrunk since the list was read
+            try:
+                if mem is None:
+                    data = ctypes.string_at(start, end - start)
+                else:
+                    data = os.pread(mem.fileno(), end - start, start)
+            except OSError:
+                break
             dump.stats["memory_bytes"] += len(data)
             dump.scan(data)
     if mem is not None:

@@ -30,6 +30,7 @@ COMMANDS = {
     "author": ["author", "cubes"],
     "sandbox run": ["sandbox", "run", "missing.py", "--function", "f"],
     "transcript pack": ["transcript", "pack", "cubes", "somewhere"],
+    "refreeze": ["refreeze", "cubes"],
 }
 
 

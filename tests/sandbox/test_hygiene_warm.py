@@ -99,21 +99,15 @@ def permissive_executor(sandbox_image):
 
 def test_ipc_left_behind_is_removed_and_its_memory_freed(permissive_executor):
     ex = permissive_executor
-    # shared memory counts against the job's limit: 1 GiB of it needs more than the default
+    # 900 MiB of shared memory: within the job's default 1 GiB, which counts it
     left = ex.run(
-        Job(
-            source=LEAVE_IPC,
-            function="f",
-            inputs={"shm_bytes": 1 << 30},
-            timeout_s=60,
-            memory_mb=1536,
-        )
+        Job(source=LEAVE_IPC, function="f", inputs={"shm_bytes": 900 << 20}, timeout_s=60)
     )
     assert left.output == dict.fromkeys(("shmget", "msgget", "semget", "mq_open"), "created"), left
     restarts = ex.restarts
     seen = ex.run(Job(source=IPC_SEEN, function="f"))
     assert seen.output == NO_IPC, seen
-    # A 2 GiB container, a small harness (nothing preloaded): with the 1 GiB segment still
+    # A 2 GiB container, a small harness (nothing preloaded): with the 900 MiB segment still
     # there, this runs out of memory.
     big = ex.run(Job(source=ALLOCATE, function="f", inputs={"n": 1000 << 20}, timeout_s=60))
     assert big.verdict == "ok" and big.output == 1000 << 20, big
