@@ -87,13 +87,16 @@ def check_sequence_used(folder: Path, history) -> None:
             )
 
 
-def derivation_problems(domain: Any, artifacts_root: Path | None = None) -> list[str]:
+def derivation_problems(
+    domain: Any, artifacts_root: Path | None = None, *, prompts: bool = True
+) -> list[str]:
     """Where `domain`'s committed transcript and frozen set are not what its people-written
     programs (`domains/<d>/programs/`, the only hand-edited source) produce: each problem in a
     line, [] when they are. Reads files only (no check runs): the transcript's answers are the
-    programs (drafts, then the final version), the frozen files are the final versions, and
-    the manifest was stamped against this checkout's contracts, toolbox and prompt templates.
-    `make refreeze` (pack, then author) makes them so."""
+    programs (drafts, then the final version), each function's first request is the one the
+    prompts build now (`prompts`: a replay would otherwise drift), the frozen files are the
+    final versions, and the manifest was stamped against this checkout's contracts, toolbox
+    and prompt templates. `make refreeze` (pack, then author) makes them so."""
     from agent.extract import extract_draft
     from agent.prompt import templates_hash
     from agent.transcript import Transcript
@@ -124,6 +127,8 @@ def derivation_problems(domain: Any, artifacts_root: Path | None = None) -> list
                 f"{domain.name}: the transcript's {function} answers are not {labels} "
                 f"({len(answers)} answers for {len(wanted)} files, or a file changed)"
             )
+    if prompts:
+        problems += _drifted_prompts(domain, transcript, sequence)
     try:
         manifest, sources = verify(domain.name, artifacts_root)
     except ArtifactError as e:
@@ -138,3 +143,30 @@ def derivation_problems(domain: Any, artifacts_root: Path | None = None) -> list
     if manifest.get("prompt_hash") != templates_hash():
         problems.append(f"{domain.name}: the set was authored from other prompt templates")
     return problems
+
+
+def _drifted_prompts(domain: Any, transcript: Any, sequence: dict) -> list[str]:
+    """The functions whose first recorded request is not the one the prompts build now, with
+    the earlier functions' final versions frozen (as the packing run had them)."""
+    from agent.context import build_context, reference_observations
+    from agent.loop import DEFAULT_MAX_TOKENS
+    from agent.prompt import build_request
+    from contracts.functions import authoring_order
+    from toolbox.docs import toolbox_docs
+
+    ctx = build_context(domain, reference_observations(domain), toolbox_docs())
+    max_attempts = max(4, max(len(seq) for seq in sequence.values()))
+    frozen: dict[str, str] = {}
+    out = []
+    for function in authoring_order():
+        entry = transcript.find(function, 1)
+        request = build_request(
+            ctx, function, 1, frozen=frozen, max_attempts=max_attempts,
+            max_tokens=DEFAULT_MAX_TOKENS,
+        )  # fmt: skip
+        if entry is not None and entry.request_hash != request.hash:
+            out.append(
+                f"{domain.name}: the prompt of {function} changed since the transcript was packed"
+            )
+        frozen[function] = sequence[function][-1][1]
+    return out

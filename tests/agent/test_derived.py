@@ -42,10 +42,10 @@ def copy(tmp_path):
 
 def test_a_program_changed_without_a_refreeze_is_found(copy):
     domain, artifacts = copy
-    assert derivation_problems(domain, artifacts) == []
+    assert derivation_problems(domain, artifacts, prompts=False) == []
     plan = domain.root / "programs" / "plan.py"
     plan.write_text(plan.read_text().replace("\ndef plan(", "\nCHANGED = 1\n\n\ndef plan(", 1))
-    problems = derivation_problems(domain, artifacts)
+    problems = derivation_problems(domain, artifacts, prompts=False)
     assert any("transcript's plan answers" in p for p in problems), problems
     assert any("frozen plan.py is not programs/plan.py" in p for p in problems), problems
 
@@ -54,7 +54,7 @@ def test_a_frozen_file_edited_by_hand_is_found(copy):
     domain, artifacts = copy
     relate = artifacts / "cubes" / "relate.py"
     relate.write_text(relate.read_text() + "\n# edited\n")
-    problems = derivation_problems(domain, artifacts)
+    problems = derivation_problems(domain, artifacts, prompts=False)
     assert len(problems) == 1 and "does not match the manifest" in problems[0], problems
 
 
@@ -63,7 +63,7 @@ def test_a_draft_that_the_transcript_lacks_is_found(copy):
     drafts = domain.root / "programs" / "drafts"
     drafts.mkdir(exist_ok=True)
     (drafts / "render_v1.py").write_text("def render(records, meshes, camera):\n    return {}\n")
-    problems = derivation_problems(domain, artifacts)
+    problems = derivation_problems(domain, artifacts, prompts=False)
     assert problems == [
         "cubes: the transcript's render answers are not drafts/render_v1.py, render.py "
         "(1 answers for 2 files, or a file changed)"
@@ -73,3 +73,22 @@ def test_a_draft_that_the_transcript_lacks_is_found(copy):
 def test_refreeze_check_exits_0_on_the_committed_files(capsys):
     assert main(["refreeze", "--check", *DOMAINS]) == 0
     assert "derived files match the programs" in capsys.readouterr().out
+
+
+def test_a_prompt_changed_since_packing_is_found(monkeypatch):
+    """A transcript packed from other prompts would drift on replay: the function whose first
+    request changed is named."""
+    import agent.prompt
+
+    real = agent.prompt.template
+
+    def edited(name: str) -> str:
+        text = real(name)
+        return text + "\nOne more sentence.\n" if name == "plan.md" else text
+
+    cubes = domains.load("cubes")
+    before = set(derivation_problems(cubes))
+    monkeypatch.setattr(agent.prompt, "template", edited)
+    assert set(derivation_problems(cubes)) - before == {
+        "cubes: the prompt of plan changed since the transcript was packed"
+    }
