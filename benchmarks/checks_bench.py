@@ -124,7 +124,9 @@ def failing(report: dict) -> list[str]:
     return [c["name"] for c in report["checks"] if not passes(c)]
 
 
-DOMAINS = domains.names()  # `--domain all`: every registered domain
+# `--domain all`: every registered domain with a mutant catalogue (an optional extra of a
+# domain, beside its people-written programs)
+DOMAINS = tuple(n for n in domains.names() if (domains.load(n).root / "mutants.toml").is_file())
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -36,13 +36,17 @@ FOLDER = {
     "tolerances.json": "the scoring tolerances (translation_m, rotation_deg or null)",
     "make_meshes.py": "`build()` → the meshes (and their convex parts) that meshes/ holds",
     "meshes/": "the OBJ files the catalogue names, nothing else",
-    "programs/": "the reference programs render.py, perceive.py, relate.py, plan.py (earlier "
-    "failing versions in drafts/<function>_v<k>.py)",
     "benchmark/": f"the dev split: goalGG_startS.json, {BENCHMARK_GOALS} goals × "
     f"{BENCHMARK_STARTS} starts",
     "benchmark/test/": "the test split, the same names and size",
+}
+# optional extras: a domain without them is authored by a model (`rivet author D --model …`);
+# with them it also replays offline and takes part in the mutation benchmark
+OPTIONAL = {
+    "programs/": "people-written reference programs render.py, perceive.py, relate.py, "
+    "plan.py (earlier failing versions in drafts/<function>_v<k>.py)",
     "transcripts/reference/": "the transcript `rivet author DOMAIN` replays (meta.json and "
-    "the responses it lists)",
+    "the responses it lists), packed from programs/",
     "mutants.toml": "the checks' mutation benchmark: bugs planted in programs/",
 }
 # what the Domain subclass defines itself (the rest has defaults in `domains.base.Domain`:
@@ -89,6 +93,18 @@ def test_the_folder_holds_what_a_domain_needs(domain):
     assert not missing, f"{domain.name}: missing {missing}"
 
 
+def test_the_optional_extras_come_together(domain):
+    """A transcript is packed from programs, and mutants are planted in them: neither without
+    the programs."""
+    held = {p for p in OPTIONAL if _exists(domain.root / p.rstrip("/"), p.endswith("/"))}
+    assert held in (
+        set(),
+        {"programs/"},
+        {"programs/", "transcripts/reference/"},
+        set(OPTIONAL),
+    ) or (held == {"programs/", "mutants.toml"}), f"{domain.name}: {sorted(held)}"
+
+
 def _exists(path: Path, is_dir: bool) -> bool:
     return path.is_dir() if is_dir else path.is_file()
 
@@ -106,7 +122,18 @@ def test_meshes_are_exactly_the_catalogues(domain):
     }
 
 
-def test_programs_benchmark_transcript_and_mutants(domain):
+def test_the_benchmark_sets_hold_every_pair(domain):
+    for split in ("dev", "test"):
+        files = {p.name for p in domain.benchmark_dir_of(split).glob("*.json")}
+        names = {
+            benchmark_name(g, s, split).rpartition("/")[2] + ".json" for g, s in benchmark_keys()
+        }
+        assert files == names, f"{domain.name} {split}: {sorted(files ^ names)}"
+
+
+def test_programs_transcript_and_mutants(domain):
+    if not (domain.root / "programs").is_dir():
+        pytest.skip(f"{domain.name} has no people-written programs (an optional extra)")
     programs = domain.root / "programs"
     assert {p.name for p in programs.glob("*.py")} == {f"{f}.py" for f in FUNCTIONS}
     assert {p.name for p in programs.iterdir() if p.name != "__pycache__"} <= {
@@ -116,13 +143,6 @@ def test_programs_benchmark_transcript_and_mutants(domain):
     for draft in (programs / "drafts").glob("*"):
         function, _, version = draft.stem.rpartition("_v")
         assert function in FUNCTIONS and version.isdigit() and draft.suffix == ".py", draft
-
-    for split in ("dev", "test"):
-        files = {p.name for p in domain.benchmark_dir_of(split).glob("*.json")}
-        names = {
-            benchmark_name(g, s, split).rpartition("/")[2] + ".json" for g, s in benchmark_keys()
-        }
-        assert files == names, f"{domain.name} {split}: {sorted(files ^ names)}"
 
     reference = domain.reference_transcript
     meta = json.loads((reference / "meta.json").read_text())
@@ -138,7 +158,7 @@ def test_programs_benchmark_transcript_and_mutants(domain):
 
 def test_nothing_else_is_in_the_folder_but_the_domains_own_code_and_the_data_it_reads(domain):
     folder = domain.root
-    required = {p.rstrip("/").partition("/")[0] for p in FOLDER}
+    required = {p.rstrip("/").partition("/")[0] for p in {**FOLDER, **OPTIONAL}}
     code = "\n".join(p.read_text() for p in folder.glob("*.py"))
     for entry in folder.iterdir():
         if entry.name in required or entry.name == "__pycache__":
