@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from contracts.errors import UsageError
-from rivet.commands._options import add_sandbox_option
+from rivet.commands._options import add_sandbox_option, int_at_least
 from rivet.commands._trials import VIEWS, _instances, _policy, cameras_of, protocol_of
 
 
@@ -61,6 +61,7 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
 
 def run(args: argparse.Namespace) -> int:
     import domains
+    from artifacts.store import ROOT as ARTIFACTS_ROOT
     from experiments.evaluation import PAPER, write_json
     from sim.trials import HONEST
 
@@ -68,9 +69,9 @@ def run(args: argparse.Namespace) -> int:
         from rivet.commands._study import run_study_command
 
         return run_study_command(args)
-    names = domains.names() if args.all else [domains.load(args.domain).name]
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
+    names = domains.names() if args.all else [domains.load(args.domain).name]
     cams = cameras_of(args)
     results: dict[str, dict[str, dict]] = {}
     for name in names:
@@ -92,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
             if "front" in results[name]:
                 front = results[name]["front"]
                 front["views"] = {v: results[name][v]["final_sr"] for v in results[name]}
-                root = Path(_policy(args.policy)[1] or "artifacts") / name
+                folder = _policy(args.policy)[1]  # where the programs were read from
+                root = (Path(folder) if folder else ARTIFACTS_ROOT) / name
                 write_json(front, root / "eval.json")
                 (root / "eval.stale.json").unlink(missing_ok=True)  # superseded
     if args.all and all("front" in results[n] and "view1" in results[n] for n in names):
@@ -133,10 +135,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="POLICY",
         help="oracle | programs DIR | artifacts (default) | runs RUNS_DIR",
     )
-    p.add_argument("--trials", type=int, default=None, metavar="N", help="run the first N trials")
+    p.add_argument(
+        "--trials", type=int_at_least(1), default=None, metavar="N", help="run the first N trials"
+    )
     p.add_argument(
         "--pairs",
-        type=int,
+        type=int_at_least(1),
         default=None,
         metavar="K",
         help="--policy runs: each run on the first K start/goal pairs of --split (default 6)",
@@ -149,14 +153,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--seed",
-        type=int,
+        type=int_at_least(0),
         default=None,
         help="a fresh generated set of --split's goal and start families from seeds S, S+1, … "
         "instead of the benchmark",
     )
     p.add_argument(
         "--composed",
-        type=int,
+        type=int_at_least(0),
         default=None,
         metavar="SEED",
         help="goals composed from the task text's parts outside every catalogue (dev-side, never "
@@ -168,7 +172,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="instance files to run instead of the benchmark",
     )
-    p.add_argument("--workers", type=int, default=1, metavar="N", help="trials in N processes")
+    p.add_argument(
+        "--workers", type=int_at_least(1), default=1, metavar="N", help="trials in N processes"
+    )
     p.add_argument(
         "--ray",
         default=None,

@@ -120,3 +120,25 @@ def test_the_protocol_options_name_what_the_robot_senses(
         tracked,
     )
     assert ("now --protocol oracle-sensing" in capsys.readouterr().err) == warned
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["cubes", "--trials", "0"], "--trials: must be at least 1, got 0"),
+        (["cubes", "--trials", "-1"], "--trials: must be at least 1, got -1"),
+        (["cubes", "--workers", "0"], "--workers: must be at least 1, got 0"),
+        (["cubes", "--seed", "-3"], "--seed: must be at least 0, got -3"),
+        (["--trials", "1"], "name a DOMAIN or pass --all"),
+    ],
+)
+def test_bad_numbers_and_a_missing_domain_exit_2_naming_them(argv, message, capsys):
+    from rivet.cli import main
+
+    try:
+        code = main(["eval", *argv])
+    except SystemExit as e:  # argparse's own errors
+        code = int(e.code or 0)
+    err = capsys.readouterr().err
+    assert code == 2 and message in err, err
+    assert "Traceback" not in err
