@@ -86,12 +86,25 @@ def _client(args: argparse.Namespace, domain, run_dir: Path, budget):
     return ReplayClient(Path(replay), strict=args.strict, budget=budget)
 
 
+def _check_model_name(model: str | None) -> None:
+    """A `--model` that names no Claude model and no provider: the Anthropic client would
+    only say that its key is missing, so say which provider prefix was probably meant."""
+    if model is None or model.startswith(("openai:", "anthropic:", "claude")):
+        return
+    raise UsageError(
+        f"--model {model}: not a Claude model. An OpenAI-compatible model is "
+        f"--model openai:{model} (with --base-url URL for a server other than OpenAI's); "
+        f"write --model anthropic:{model} to send it to Anthropic's API as it is"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     import domains
     from agent.checking import SuiteChecker
     from agent.context import build_context, reference_observations
     from toolbox.docs import toolbox_docs
 
+    _check_model_name(args.model)  # before anything is created
     domain = domains.load(args.domain)
     runs_root = Path(args.runs_dir)
     if args.ray:

@@ -107,6 +107,10 @@ def test_a_whole_run_by_an_agent_command_is_frozen_and_names_it(tmp_path, capsys
         ),
         (["--base-url", "http://127.0.0.1:9"], "--base-url: only with --model"),
         (["--model", "claude-opus-5", "--price", "x"], "--price 'x'"),
+        (
+            ["--model", "gpt-4o"],
+            "not a Claude model. An OpenAI-compatible model is --model openai:gpt-4o",
+        ),
     ],
 )
 def test_option_mistakes_are_usage_errors(tmp_path, capsys, args, message):
