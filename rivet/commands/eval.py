@@ -72,6 +72,16 @@ def run(args: argparse.Namespace) -> int:
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
     names = domains.names() if args.all else [domains.load(args.domain).name]
+    kind, folder = _policy(args.policy)
+    if kind == "artifacts" and folder is not None:  # a folder of frozen sets, like artifacts/
+        for name in names:
+            if not (Path(folder) / name / "manifest.json").is_file():
+                raise UsageError(
+                    f"--policy artifacts {folder}: no frozen {name} set there "
+                    f"({Path(folder) / name / 'manifest.json'} is missing); DIR holds one "
+                    f"folder per domain, as artifacts/ does (--policy programs DIR reads a "
+                    "folder of four programs)"
+                )
     cams = cameras_of(args)
     results: dict[str, dict[str, dict]] = {}
     for name in names:

@@ -130,6 +130,10 @@ def test_the_protocol_options_name_what_the_robot_senses(
         (["cubes", "--workers", "0"], "--workers: must be at least 1, got 0"),
         (["cubes", "--seed", "-3"], "--seed: must be at least 0, got -3"),
         (["--trials", "1"], "name a DOMAIN or pass --all"),
+        (
+            ["cubes", "--policy", "artifacts", "cubes"],
+            "--policy artifacts cubes: no frozen cubes set",
+        ),
     ],
 )
 def test_bad_numbers_and_a_missing_domain_exit_2_naming_them(argv, message, capsys):
