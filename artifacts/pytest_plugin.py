@@ -62,7 +62,10 @@ def pytest_configure(config: pytest.Config) -> None:
         path = Path(root)
         if not path.is_dir():
             raise pytest.UsageError(f"--rivet-artifacts {root}: not a directory")
-        config.args.append(str(path))
+        if config.args_source != pytest.Config.ArgsSource.ARGS:  # no paths given
+            config.args[:] = [str(path)]  # only the suites it was pointed at
+        else:
+            config.args.append(str(path))  # beside the paths given (`pytest tests --rivet-…`)
 
 
 def pytest_collect_file(parent: pytest.Collector, file_path: Path):
@@ -95,6 +98,13 @@ class IntegrityItem(pytest.Item):
         from artifacts.store import verify
 
         verify(self.domain, self.path.parent.parent)
+
+    def repr_failure(self, excinfo, style=None):
+        from artifacts.errors import ArtifactError
+
+        if isinstance(excinfo.value, ArtifactError):  # one readable line, no traceback
+            return f"{self.domain}: {excinfo.value}"
+        return super().repr_failure(excinfo, style=style)
 
     def reportinfo(self):
         return self.path, None, f"{self.domain}: manifest and file hashes"
@@ -138,8 +148,12 @@ class CheckItem(pytest.Item):
             )
 
     def repr_failure(self, excinfo, style=None):
+        from artifacts.errors import ArtifactError
+
         if isinstance(excinfo.value, CheckFailed):
             return str(excinfo.value)
+        if isinstance(excinfo.value, ArtifactError):
+            return f"{self.domain}: {excinfo.value}"
         return super().repr_failure(excinfo, style=style)
 
     def reportinfo(self):

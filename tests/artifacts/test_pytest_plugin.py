@@ -51,3 +51,24 @@ def test_a_tampered_file_fails_the_integrity_item_naming_it(tmp_path):
     bad = _pytest(tmp_path, "-q", "-k", "integrity", str(tmp_path / "cubes" / "manifest.json"))
     assert bad.returncode == 1, bad.stdout + bad.stderr
     assert "plan.py" in bad.stdout
+
+
+def test_pointed_at_a_folder_it_collects_only_its_sets(tmp_path):
+    """Without paths, only the artifact suites; with paths, those as well (as `make test`)."""
+    shutil.copytree(REPO / "artifacts" / "cubes", tmp_path / "cubes")
+    alone = _pytest(tmp_path, "--collect-only", "-q")
+    assert alone.returncode == 0, alone.stdout + alone.stderr
+    items = [line for line in alone.stdout.splitlines() if "::" in line]
+    assert len(items) == 5 and all("manifest.json::cubes::" in i for i in items), items
+    beside = _pytest(tmp_path, "--collect-only", "-q", "tests/test_import_graph.py")
+    assert "tests/test_import_graph.py::" in beside.stdout
+    assert "manifest.json::cubes::integrity" in beside.stdout
+
+
+def test_an_integrity_failure_is_one_readable_line(tmp_path):
+    shutil.copytree(REPO / "artifacts" / "cubes", tmp_path / "cubes")
+    (tmp_path / "cubes" / "relate.py").write_text("# replaced\n")
+    bad = _pytest(tmp_path, "-q", "-k", "integrity")
+    assert bad.returncode == 1
+    assert "refusing to load a modified artifact" in bad.stdout
+    assert "Traceback" not in bad.stdout and "raise ArtifactError" not in bad.stdout, bad.stdout
