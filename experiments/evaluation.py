@@ -152,6 +152,19 @@ def run_eval(
     return summarise(config, per_trial)
 
 
+def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float] | None:
+    """The Wilson score interval (95 % by default) of a rate of `successes` in `n` trials;
+    None for no trials."""
+    if n == 0:
+        return None
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    low = 0.0 if successes == 0 else max(0.0, float(centre - half))
+    high = 1.0 if successes == n else min(1.0, float(centre + half))
+    return low, high
+
+
 def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
     n = len(per_trial)
     rate = lambda key: (sum(t[key] for t in per_trial) / n) if n else 0.0  # noqa: E731
@@ -175,6 +188,14 @@ def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
         "state_ac": rate("state_ok"),
         "plan_sr": rate("plan_ok"),
         "final_sr": rate("final_ok"),
+        "intervals": {  # Wilson 95 % of each rate
+            key: wilson(sum(bool(t[ok]) for t in per_trial), n)
+            for key, ok in (
+                ("state_ac", "state_ok"),
+                ("plan_sr", "plan_ok"),
+                ("final_sr", "final_ok"),
+            )
+        },
         "final_with_failed_plan": sum(t["final_ok"] and not t["plan_ok"] for t in per_trial),
         "view": config.view,
         "split": config.split,
@@ -211,8 +232,12 @@ def table(summary: dict) -> str:
         f"{d} · policy {summary['policy']} · view {summary['view']} · split "
         f"{summary.get('split', 'dev')} · {summary['trials']} trials",
         f"  protocol: {summary.get('protocol', '')}",
-        f"  {'metric':<10} {'ours':>7} {'paper':>7}",
+        f"  {'metric':<10} {'ours':>7} {'95 % interval':>15} {'paper':>7}",
     ]
+    spans = summary.get("intervals", {})
+    span = lambda k: (  # noqa: E731
+        "" if spans.get(k) is None else f"{100 * spans[k][0]:.1f}–{100 * spans[k][1]:.1f}%"
+    )
     for key in ("state_ac", "plan_sr", "final_sr"):
         ref = (
             paper.get(key)
@@ -221,7 +246,7 @@ def table(summary: dict) -> str:
             if key == "final_sr"
             else None
         )
-        lines.append(f"  {key:<10} {pct(summary[key]):>7} {pct(ref):>7}")
+        lines.append(f"  {key:<10} {pct(summary[key]):>7} {span(key):>15} {pct(ref):>7}")
     if summary.get("final_with_failed_plan"):
         lines.append(f"  final successes with a failed plan: {summary['final_with_failed_plan']}")
     t, p = summary["timing"], summary["precision"]
