@@ -98,6 +98,36 @@ def _check_model_name(model: str | None) -> None:
     )
 
 
+def _check_sources(args: argparse.Namespace, domain) -> None:
+    """What the client will need, checked before a run folder exists: a transcript to replay,
+    or the credential of the model's provider (the clients say the same, later)."""
+    import os
+
+    if args.agent:
+        return
+    if not args.model:
+        replay = Path(args.replay) if args.replay else domain.reference_transcript
+        if not (replay / "meta.json").is_file():
+            raise UsageError(
+                f"no transcript at {replay}: pass --replay DIR, --model M (with "
+                "ANTHROPIC_API_KEY set) or --agent COMMAND"
+            )
+        return
+    if args.model.startswith("openai:"):
+        if not os.environ.get("OPENAI_API_KEY") and not (
+            args.base_url or os.environ.get("OPENAI_BASE_URL")
+        ):
+            raise UsageError(
+                "OPENAI_API_KEY is not set: export it to use OpenAI's API, or point --base-url "
+                "at an OpenAI-compatible server (vLLM, Ollama, LiteLLM)"
+            )
+    elif not (os.environ.get("ANTHROPIC_API_KEY") or os.environ.get("ANTHROPIC_AUTH_TOKEN")):
+        raise UsageError(
+            "ANTHROPIC_API_KEY is not set (nor ANTHROPIC_AUTH_TOKEN): export one to author "
+            "with a model, or replay a transcript (rivet author DOMAIN --replay DIR)"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     import domains
     from agent.checking import SuiteChecker
@@ -107,8 +137,9 @@ def run(args: argparse.Namespace) -> int:
     _check_model_name(args.model)  # before anything is created
     domain = domains.load(args.domain)
     runs_root = Path(args.runs_dir)
-    if args.ray:
+    if args.ray:  # each Ray node runs `rivet author` itself, with its own environment
         return _author_on_ray(args, domain.name, runs_root)
+    _check_sources(args, domain)
     ctx = build_context(domain, reference_observations(domain), toolbox_docs())
     checker = SuiteChecker(sandbox=args.sandbox, thorough=args.thorough)
     results: list[bool] = []

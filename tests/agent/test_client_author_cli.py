@@ -171,3 +171,24 @@ def test_resume_starts_from_what_the_run_spent(tmp_path, capsys):
         [run] = (tmp_path / "runs" / "cubes").iterdir()
         events = [json.loads(line) for line in (run / "journal.jsonl").read_text().splitlines()]
         assert sum(e["event"] == "refused" for e in events) == 2
+
+
+@pytest.mark.parametrize(
+    ("args", "unset", "message"),
+    [
+        (["--replay", "/nowhere"], None, "no transcript at /nowhere"),
+        (["--model", "claude-opus-5"], "ANTHROPIC_API_KEY", "ANTHROPIC_API_KEY is not set"),
+        (["--model", "openai:gpt-4o"], "OPENAI_API_KEY", "OPENAI_API_KEY is not set"),
+        (["--model", "gpt-4o"], None, "--model openai:gpt-4o"),
+    ],
+)
+def test_nothing_is_created_before_the_sources_are_checked(
+    tmp_path, capsys, monkeypatch, args, unset, message
+):
+    if unset:
+        monkeypatch.delenv(unset, raising=False)
+        monkeypatch.delenv("ANTHROPIC_AUTH_TOKEN", raising=False)
+        monkeypatch.delenv("OPENAI_BASE_URL", raising=False)
+    assert author(tmp_path, *args) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()  # no empty run for a study to count as failed
