@@ -59,6 +59,18 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
     return summary
 
 
+def _check_robot_models() -> None:
+    """The robot's models load (MENAGERIE_ROOT, the menagerie package): else every trial would
+    fail the same way and be scored as a failed trial."""
+    from sim.errors import RobotModelError
+    from sim.robot import build_robot_spec
+
+    try:
+        build_robot_spec()
+    except RobotModelError as e:
+        raise UsageError(f"the simulator cannot run: {e}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     import domains
     from artifacts.store import ROOT as ARTIFACTS_ROOT
@@ -72,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
     names = domains.names() if args.all else [domains.load(args.domain).name]
+    _check_robot_models()  # a configuration problem is found before the first trial
     kind, folder = _policy(args.policy)
     if kind == "artifacts" and folder is not None:  # a folder of frozen sets, like artifacts/
         for name in names:

@@ -146,3 +146,22 @@ def test_bad_numbers_and_a_missing_domain_exit_2_naming_them(argv, message, caps
     err = capsys.readouterr().err
     assert code == 2 and message in err, err
     assert "Traceback" not in err
+
+
+def test_a_robot_model_that_does_not_load_stops_before_any_trial(tmp_path, monkeypatch):
+    """MENAGERIE_ROOT pointing nowhere was scored as a 0 % table of failed trials, then the
+    cause; now the cause, exit 2, and no trial."""
+    import subprocess
+
+    env = {**__import__("os").environ, "MENAGERIE_ROOT": str(tmp_path / "nowhere")}
+    proc = subprocess.run(
+        [RIVET, "eval", "cubes", "--policy", "oracle", "--trials", "1", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+        env=env,
+    )
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "the simulator cannot run: cannot load menagerie model" in proc.stderr
+    assert "final_sr" not in proc.stdout and "Traceback" not in proc.stderr
