@@ -165,3 +165,42 @@ def test_a_robot_model_that_does_not_load_stops_before_any_trial(tmp_path, monke
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert "the simulator cannot run: cannot load menagerie model" in proc.stderr
     assert "final_sr" not in proc.stdout and "Traceback" not in proc.stderr
+
+
+@pytest.mark.docker
+@pytest.mark.slow
+def test_sigterm_stops_an_evaluation_like_ctrl_c_and_removes_its_containers(tmp_path):
+    """A cancelled CI job sends SIGTERM: the evaluation unwinds as on Ctrl-C (exit 143,
+    "terminated"), and the policy's sandbox container is removed, not left exited."""
+    import signal
+    import subprocess
+    import time
+
+    import docker
+
+    proc = subprocess.Popen(
+        [RIVET, "eval", "cubes", "--policy", "artifacts", "--trials", "5", "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+    )
+    client = docker.from_env()
+
+    def owned() -> list:
+        listed = client.containers.list(all=True, filters={"label": "rivet.sandbox=1"})
+        return [
+            c
+            for c in listed
+            if c.labels.get("rivet.sandbox.owner", "").split(":")[1:2] == [str(proc.pid)]
+        ]
+
+    deadline = time.monotonic() + 120
+    while not owned() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.5)
+    assert owned(), "the evaluation never started its sandbox"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err[-2000:]
+    assert "terminated" in err and "Traceback" not in err, err[-2000:]
+    assert owned() == [], [c.name for c in owned()]
