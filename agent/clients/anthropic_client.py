@@ -71,6 +71,12 @@ EFFORT_HEADROOM = {"low": 4000, "medium": 16000, "high": 32000}
 MIN_THINKING_BUDGET = 1024
 
 
+MISSING_KEY = (
+    "ANTHROPIC_API_KEY is not set (nor ANTHROPIC_AUTH_TOKEN): export one to author with a "
+    "model, or replay a transcript (rivet author DOMAIN --replay DIR)"
+)
+
+
 class AnthropicClient:
     def __init__(
         self,
@@ -97,10 +103,7 @@ class AnthropicClient:
         key = os.environ.get("ANTHROPIC_API_KEY") or None
         token = None if key else (os.environ.get("ANTHROPIC_AUTH_TOKEN") or None)
         if not key and not token:
-            raise AgentError(
-                "ANTHROPIC_API_KEY is not set (nor ANTHROPIC_AUTH_TOKEN): export one to author "
-                "with a model, or replay a transcript (rivet author DOMAIN --replay DIR)"
-            )
+            raise AgentError(MISSING_KEY)
         if thinking_budget is not None and effort is not None:
             raise UsageError("--thinking and --effort are exclusive: give one")
         if thinking_budget is not None and thinking_budget < MIN_THINKING_BUDGET:

@@ -41,6 +41,10 @@ from agent.errors import AgentError, BudgetExceeded, ModelCallFailed, ModelRefus
 from contracts.errors import UsageError
 
 PREFIX = "openai:"
+MISSING_KEY = (
+    "OPENAI_API_KEY is not set: export it to use OpenAI's API, or point --base-url at an "
+    "OpenAI-compatible server (vLLM, Ollama, LiteLLM)"
+)
 DEFAULT_BASE_URL = "https://api.openai.com/v1"
 EFFORTS = ("low", "medium", "high")
 _FINISH = {"stop": "end_turn", "length": "max_tokens", "tool_calls": "tool_use"}
@@ -73,10 +77,7 @@ class OpenAIClient:
         _http.forbid_real_api(self.base_url, injected=http_client is not None)
         key = os.environ.get("OPENAI_API_KEY") or None
         if key is None and self.base_url == DEFAULT_BASE_URL:
-            raise AgentError(
-                "OPENAI_API_KEY is not set: export it to use OpenAI's API, or point --base-url at "
-                "an OpenAI-compatible server (vLLM, Ollama, LiteLLM)"
-            )
+            raise AgentError(MISSING_KEY)
         self.budget = budget or Budget()
         if self.budget.max_usd is not None and price is None:
             raise UsageError(

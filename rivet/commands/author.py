@@ -77,12 +77,7 @@ def _client(args: argparse.Namespace, domain, run_dir: Path, budget):
         return RecordingClient(inner, run_dir / "transcript", domain=domain.name)
     if _model_options(args):
         raise UsageError(f"{', '.join(_model_options(args))}: only with --model")
-    replay = args.replay or domain.reference_transcript
-    if not (Path(replay) / "meta.json").is_file():
-        raise UsageError(
-            f"no transcript at {replay}: pass --replay DIR, --model M (with ANTHROPIC_API_KEY "
-            "set) or --agent COMMAND"
-        )
+    replay = args.replay or domain.reference_transcript  # found by `_check_sources`
     return ReplayClient(Path(replay), strict=args.strict, budget=budget)
 
 
@@ -103,6 +98,8 @@ def _check_sources(args: argparse.Namespace, domain) -> None:
     or the credential of the model's provider (the clients say the same, later)."""
     import os
 
+    from agent.clients import anthropic_client, openai_client
+
     if args.agent:
         return
     if not args.model:
@@ -117,15 +114,9 @@ def _check_sources(args: argparse.Namespace, domain) -> None:
         if not os.environ.get("OPENAI_API_KEY") and not (
             args.base_url or os.environ.get("OPENAI_BASE_URL")
         ):
-            raise UsageError(
-                "OPENAI_API_KEY is not set: export it to use OpenAI's API, or point --base-url "
-                "at an OpenAI-compatible server (vLLM, Ollama, LiteLLM)"
-            )
+            raise UsageError(openai_client.MISSING_KEY)
     elif not (os.environ.get("ANTHROPIC_API_KEY") or os.environ.get("ANTHROPIC_AUTH_TOKEN")):
-        raise UsageError(
-            "ANTHROPIC_API_KEY is not set (nor ANTHROPIC_AUTH_TOKEN): export one to author "
-            "with a model, or replay a transcript (rivet author DOMAIN --replay DIR)"
-        )
+        raise UsageError(anthropic_client.MISSING_KEY)
 
 
 def run(args: argparse.Namespace) -> int:
