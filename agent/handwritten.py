@@ -44,6 +44,11 @@ def program_sequence(folder: Path) -> dict[str, list[tuple[str, str]]]:
     return out
 
 
+def packing_attempts(sequence: dict[str, list[tuple[str, str]]]) -> int:
+    """The packing run's attempts per function: room for every draft and the final version."""
+    return max(4, max(len(seq) for seq in sequence.values()))
+
+
 def response_text(source: str, names: str) -> str:
     return f"{PREAMBLE.format(names=names)}\n\n```python\n{source.rstrip()}\n```\n"
 
@@ -155,7 +160,7 @@ def _drifted_prompts(domain: Any, transcript: Any, sequence: dict) -> list[str]:
     from toolbox.docs import toolbox_docs
 
     ctx = build_context(domain, reference_observations(domain), toolbox_docs())
-    max_attempts = max(4, max(len(seq) for seq in sequence.values()))
+    max_attempts = packing_attempts(sequence)
     frozen: dict[str, str] = {}
     out = []
     for function in authoring_order():

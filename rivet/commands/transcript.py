@@ -15,7 +15,12 @@ def pack(args: argparse.Namespace) -> int:
     import domains
     from agent.checking import SuiteChecker
     from agent.context import build_context, reference_observations
-    from agent.handwritten import check_sequence_used, packing_client, program_sequence
+    from agent.handwritten import (
+        check_sequence_used,
+        packing_attempts,
+        packing_client,
+        program_sequence,
+    )
     from agent.journal import Journal, new_run_dir
     from agent.loop import AuthoringRun
     from toolbox.docs import toolbox_docs
@@ -40,7 +45,7 @@ def pack(args: argparse.Namespace) -> int:
         client=client,
         checker=checker,
         journal=Journal(new_run_dir(Path("runs"), domain.name)),
-        max_attempts=max(4, max(len(s) for s in sequence.values())),
+        max_attempts=packing_attempts(sequence),
         cases_seed=seed,
     )
     try:
