@@ -44,13 +44,39 @@ def test_a_missing_or_misordered_label_is_an_error():
         split_at(place, "reaching", "descending")
 
 
-def test_the_planner_labels_what_the_executor_cuts_at():
-    """The labels the executor cuts at are the planner's own, in the order it cuts."""
-    import inspect
+def test_a_planned_transfer_cuts_into_the_executors_phases():
+    """A real pick and place, planned as the executor plans them, cut at the labels the
+    executor uses: every phase is there, in order, and nothing is left between them."""
+    import domains
+    from benchmarks.transfer_sweep import planner
+    from sim import robot
+    from sim.execution import ExecutorConfig
+    from sim.executor import _place_phases
+    from sim.transfer import CLOSING, LIFTING, TransferPlanner, obstacles
+    from sim.trials import OraclePolicy
 
-    from sim import transfer
-
-    source = inspect.getsource(transfer.TransferPlanner)
-    names = ("CLOSING", "LIFTING", "DESCENDING", "REACHING", "SETTLING", "RETREATING")
-    positions = [source.index(f"label={n}") for n in names]
-    assert positions[:2] == sorted(positions[:2]) and positions[2:] == sorted(positions[2:])
+    domain = domains.load("cubes")
+    instance = domain.benchmark("dev")[0]
+    parts = planner()
+    transfers = TransferPlanner(parts.ik, ExecutorConfig(), parts.wrist, parts.tick_dt)
+    step = OraclePolicy().solve_from_truth(instance, domain).plan["steps"][0]
+    records = {r["id"]: r for r in instance.start["objects"]}
+    belief = {o: np.asarray(r["pose"], float) for o, r in records.items()}
+    meshes = {o: domain.mesh(r["mesh"]) for o, r in records.items()}
+    oid = step["object"]
+    target = np.asarray(step["target_pose"], float)
+    chosen = transfers.choose(
+        robot.READY_QPOS, robot.GRIPPER_OPEN, meshes[oid],
+        list(domain.symmetries(records[oid]["mesh"])), belief[oid], target,
+        obstacles(belief, meshes, oid),
+    )  # fmt: skip
+    approach, close, lift = split_at(chosen.pick, CLOSING, LIFTING)
+    assert approach and _labels([close, lift]) == [["closing", "squeezing"], ["lifting"]]
+    place = transfers.place_segments(chosen.pick[-1].q[-1], chosen.grasp, target, chosen.transfer_z)
+    assert _labels(_place_phases(place)) == [
+        ["transferring"],
+        ["descending to the target"],
+        ["reaching the target"],
+        ["settling before release", "opening", "settling after release"],
+        ["retreating"],
+    ]
