@@ -55,6 +55,10 @@ class ProgramPolicy:
         timings.update({f"cpu_{k}": v for k, v in run.cpu.items()})
         return PolicyOutput(plan=plan, start_state=start, goal_state=goal, timings=timings)
 
+    def programs(self) -> Runner:
+        """The programs' session, for the closed loop (`sim.loop`): perceive, relate, plan."""
+        return self.runner()
+
     def reset(self) -> None:
         if self._runner is not None:
             self._runner.close()

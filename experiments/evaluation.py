@@ -54,6 +54,8 @@ class EvalConfig:
     split: str = "dev"
     sandbox: str = "docker"
     record_root: str | None = None
+    loop: str = "open"  # "closed": look again after each transfer and replan (sim.loop)
+    faults: tuple[str, ...] = ()  # one fault per trial drawn from these (sim.faults)
 
 
 def make_policy(config: EvalConfig) -> Any:
@@ -86,6 +88,8 @@ def _run_one(instance_json: dict) -> dict:
             camera=cfg.camera if cfg.camera is not None else cfg.view,
             protocol=cfg.protocol,
             record_dir=record,
+            loop=cfg.loop,  # type: ignore[arg-type]
+            faults=cfg.faults,
         ).to_dict()
     except Exception as e:  # a broken trial must not stop the run
         import traceback
@@ -208,6 +212,8 @@ def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
             "weld_assist": config.protocol.weld_assist,
         },
         "failures": dict(Counter(t["failure"]["stage"] for t in per_trial if t["failure"])),
+        "loop": config.loop,
+        **({"faults": fault_table(per_trial)} if config.faults else {}),
         "timing": {
             "median_policy_latency_s": statistics.median(latency) if latency else None,
             "median_policy_cpu_s": statistics.median(cpu) if cpu else None,
@@ -223,6 +229,31 @@ def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
     }
 
 
+def fault_table(per_trial: list[dict]) -> dict[str, dict]:
+    """Per fault: trials it happened in, and how they ended — recovered (final success), gave
+    up (the closed loop stopped, saying why) or wrong (ended otherwise off the goal)."""
+    out: dict[str, dict] = {}
+    for t in per_trial:
+        f = t.get("fault")
+        if not f:
+            continue
+        row = out.setdefault(f["name"], {"drawn": 0, "happened": 0, "recovered": 0, "gave_up": 0,
+                                         "wrong": 0})  # fmt: skip
+        row["drawn"] += 1
+        if not f.get("happened"):
+            continue
+        row["happened"] += 1
+        if t["final_ok"]:
+            row["recovered"] += 1
+        elif (t.get("loop") or {}).get("status") == "gave_up":
+            row["gave_up"] += 1
+        else:
+            row["wrong"] += 1
+    for row in out.values():
+        row["interval"] = wilson(row["recovered"], row["happened"])
+    return out
+
+
 def table(summary: dict) -> str:
     """The terminal table: metrics, paper figures where known, and every failure."""
     d = summary["domain"]
@@ -231,7 +262,8 @@ def table(summary: dict) -> str:
     lines = [
         f"{d} · policy {summary['policy']} · view {summary['view']} · split "
         f"{summary.get('split', 'dev')} · {summary['trials']} trials",
-        f"  protocol: {summary.get('protocol', '')}",
+        f"  protocol: {summary.get('protocol', '')}"
+        + (", closed loop" if summary.get("loop") == "closed" else ""),
         f"  {'metric':<10} {'ours':>7} {'95 % interval':>15} {'paper':>7}",
     ]
     spans = summary.get("intervals", {})
@@ -270,6 +302,13 @@ def table(summary: dict) -> str:
             f"  placement: median position error {p['median_position_error_mm']:.2f} mm, "
             f"median yaw error {p['median_yaw_error_deg']:.2f}° over {p['placements']} placements"
         )
+    if summary.get("faults"):
+        lines.append(f"  {'fault':<6} {'happened':>8} {'recovered':>9} {'gave up':>7} {'wrong':>5}")
+        for name, row in summary["faults"].items():
+            lines.append(
+                f"  {name:<6} {row['happened']:>4}/{row['drawn']:<3} {row['recovered']:>9} "
+                f"{row['gave_up']:>7} {row['wrong']:>5}"
+            )
     failed = [tr for tr in summary["per_trial"] if tr["failure"]]
     if failed:
         lines.append(f"  failures ({len(failed)}):")

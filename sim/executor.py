@@ -24,7 +24,7 @@ caller; the arm is still parked.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -138,6 +138,13 @@ class Executor:
         self._next_frame = data.time
         self._frames = 0
         self._deadline: float | None = None
+        self._oid = ""
+        self.on_phase: Callable[[Executor, str, str], None] | None = None
+        """Called as `on_phase(executor, phase, object)` at the start of each phase of a
+        transfer (and "done" at its end): the world's hook for faults (`sim.faults`)."""
+        self.grip_override: float | None = None
+        """A gripper command that replaces the executor's own while set: a fault (the hand
+        letting go), never the executor's decision."""
 
     @property
     def weld_assist(self) -> bool:
@@ -222,6 +229,7 @@ class Executor:
 
     def _transfer(self, i: int, oid: str, target: np.ndarray) -> StepOutcome:
         self._tracker = _Tracker()
+        self._oid = oid
         t0 = self.data.time
         grasp: Grasp | None = None
         weld = self.sensors.weld
@@ -410,6 +418,8 @@ class Executor:
 
     def _mark(self, phase: str) -> None:
         self._tracker.phases.append((phase, float(self.data.time)))
+        if self.on_phase is not None:
+            self.on_phase(self, phase, self._oid)
 
     def _run_phase(self, phase: Phase, planned: Sequence[PlannedSegment]) -> None:
         self._check_deadline(phase)
@@ -436,7 +446,9 @@ class Executor:
                 self._q_cmd = q_next
                 if seg.grip is not None:
                     self._grip_cmd = float(seg.grip[k])
-                d.ctrl[grip_act] = self._grip_cmd
+                d.ctrl[grip_act] = (
+                    self._grip_cmd if self.grip_override is None else self.grip_override
+                )
                 if self.sensors.weld is not None:
                     self.sensors.weld.update(self._grip_cmd)
                 for f in fractions:

@@ -24,8 +24,8 @@ from __future__ import annotations
 import time
 import traceback
 import zlib
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -33,17 +33,22 @@ import mujoco
 import numpy as np
 
 from contracts import ContractError, se3, to_jsonable, validate
+from contracts.errors import UsageError
 from contracts.limits import clip, count_problem, plan_problem
 from domains import Domain
 from domains.instance import Instance
 from sim import robot
 from sim.executor import Executor, ExecutorConfig
+from sim.faults import Fault, Injector, biased
+from sim.faults import draw as draw_fault
+from sim.loop import ClosedLoop, RecoveryBudget
 from sim.observation import observe, renderer_for
 from sim.scene import body_name, build_spec
 from sim.score import final_success, state_accuracy
 from sim.sensing import EXACT, WRIST_CAMERA, Sensors
 from sim.settle import check_order
 
+Loop = Literal["open", "closed"]
 Stage = Literal["perception", "relations", "planning", "grasp", "motion", "execution", "harness"]
 TRIAL_DEADLINE_S = 600.0  # [s] wall clock, one trial: 50× the slowest domain's median (11 s)
 # which stage an executor failure belongs to
@@ -96,8 +101,6 @@ class TrialProtocol:
         return ", ".join(parts)
 
     def executor_config(self, base: ExecutorConfig | None = None) -> ExecutorConfig:
-        from dataclasses import replace
-
         noise = {"wrist": WRIST_CAMERA, "exact": EXACT, "none": None}[self.in_hand]
         return replace(base or ExecutorConfig(), in_hand=noise, track_objects=self.track_objects)
 
@@ -176,6 +179,8 @@ class TrialResult:
     object_errors: list[dict]
     execution_failure: dict | None = None  # the executor's own failure (step, kind, phase, reason)
     plan_failure: str | None = None  # why the plan failed its abstract check, when it did
+    loop: dict | None = None  # the closed loop's record (`sim.loop.ClosedLoop.to_dict`)
+    fault: dict | None = None  # the injected fault and what it did (`sim.faults.Fault`)
 
     def to_dict(self) -> dict:
         return {
@@ -189,6 +194,8 @@ class TrialResult:
             "object_errors": self.object_errors,
             "execution_failure": self.execution_failure,
             "plan_failure": self.plan_failure,
+            **({"loop": self.loop} if self.loop is not None else {}),
+            **({"fault": self.fault} if self.fault is not None else {}),
         }
 
 
@@ -253,10 +260,23 @@ def run_trial(
     record_dir: Path | None = None,
     config: ExecutorConfig | None = None,
     deadline_s: float = TRIAL_DEADLINE_S,
+    loop: Loop = "open",
+    faults: Sequence[str] = (),
+    budget: RecoveryBudget | None = None,
 ) -> TrialResult:
     """Run one trial end to end; see the module docstring. `camera`: a view name or a camera
     dict (the true camera; the policy gets it calibrated). `deadline_s`: the trial's wall-clock
-    deadline [s], counted from its start."""
+    deadline [s], counted from its start. `loop`: "open" (the paper's protocol: the plan runs
+    to its end) or "closed" (`sim.loop`: look again after each transfer and replan, with the
+    policy's programs and `budget`). `faults`: the names (`sim.faults.FAULTS`) one fault of the
+    trial is drawn from; none when empty."""
+    if loop not in ("open", "closed"):
+        raise UsageError(f"loop must be 'open' or 'closed', got {loop!r}")
+    if loop == "closed" and not callable(getattr(policy, "programs", None)):
+        raise UsageError(
+            f"the closed loop needs a policy with programs to look again with; "
+            f"{getattr(policy, 'name', type(policy).__name__)} has none"
+        )
     timings: dict[str, float] = {}
     failure: tuple[Stage, str] | None = None
     t0 = time.perf_counter()
@@ -350,6 +370,8 @@ def run_trial(
     execution_failure: dict | None = None
     step_info: list[dict] = []
     object_errors: list[dict] = []
+    fault: Fault | None = None
+    loop_record: dict | None = None
     if plan is not None and plan["status"] == "ok":
         t = time.perf_counter()
         model, data = _world(domain, instance)
@@ -359,10 +381,12 @@ def run_trial(
             o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
             for o in instance.start["objects"]
         }
+        fault = draw_fault(faults, instance.name, len(plan["steps"]))
+        believed_start = biased(fault, out.start_state)
         belief = (
             {o["id"]: np.asarray(o["pose"], float) for o in instance.start["objects"]}
             if out.start_state is None  # the oracle: ground-truth states
-            else belief_of(out.start_state)
+            else belief_of(believed_start)
         )
         exec_config = protocol.executor_config(config)
         sensors = Sensors.of(
@@ -377,13 +401,40 @@ def run_trial(
         executor = Executor(
             model, data, meshes, belief=belief, sensors=sensors, record=recorder, config=exec_config
         )
-        result = executor.execute(plan, deadline=deadline)
-        timings["execute_wall"] = result.wall_time
-        timings["execute_sim"] = result.sim_time
-        step_info = [s.to_dict() for s in result.steps]
-        if result.failure is not None:
-            f = result.failure
-            execution_failure = result.failure.to_dict()
+        injector = Injector(fault, model, data, meshes)
+        executor.on_phase = injector.on_phase
+        if loop == "closed":
+            assert isinstance(believed_start, Mapping) and isinstance(out.goal_state, Mapping)
+            closed = _ClosedTrial(domain, instance, camera, protocol, executor, injector, deadline)
+            step_info, last_failure, loop_record = closed.run(
+                ClosedLoop(domain, policy.programs(), budget=budget or RecoveryBudget()),
+                believed_start,
+                out.goal_state,
+                plan,
+            )
+            timings["loop_programs"] = closed.program_seconds
+            if loop_record["status"] == "gave_up" and failure is None:
+                failure = (
+                    _STAGE_OF_KIND.get(last_failure.kind, "execution") if last_failure
+                    else "execution",
+                    f"the closed loop gave up: {loop_record['reason']}",
+                )  # fmt: skip
+            result_failure = last_failure if loop_record["status"] != "done" else None
+        else:
+            if fault is not None and fault.name == "skip":
+                plan = {
+                    **plan,
+                    "steps": [s for k, s in enumerate(plan["steps"]) if k != fault.step],
+                }
+                injector.skipped_in_plan()
+            result = executor.execute(plan, deadline=deadline)
+            timings["execute_wall"] = result.wall_time
+            timings["execute_sim"] = result.sim_time
+            step_info = [s.to_dict() for s in result.steps]
+            result_failure = result.failure
+        if result_failure is not None:
+            f = result_failure
+            execution_failure = f.to_dict()
             failure = failure or (
                 _STAGE_OF_KIND.get(f.kind, "execution"),
                 f"the trial ran past its {deadline_s:g} s wall-clock deadline: step {f.step} "
@@ -403,6 +454,13 @@ def run_trial(
         final_ok = score.success and not (
             execution_failure is not None and execution_failure["kind"] == "deadline"
         )
+        if (
+            final_ok
+            and loop == "closed"
+            and failure is not None
+            and failure[1].startswith("the closed loop gave up")
+        ):
+            failure = None  # it gave up, but the scene it left was the goal
         object_errors = [e.to_dict() for e in score.objects]
         if not final_ok and failure is None:
             bad = [e for e in score.objects if not e.within]
@@ -436,7 +494,80 @@ def run_trial(
         object_errors=object_errors,
         execution_failure=execution_failure,
         plan_failure=plan_failure,
+        loop=loop_record,
+        fault=None if fault is None else fault.to_dict(),
     )
+
+
+class _ClosedTrial:
+    """The robot side of a closed-loop trial: carry out each step the loop hands out (parking
+    after it), let the fault act, and look again with the trial's camera and realism."""
+
+    def __init__(self, domain, instance, camera, protocol, executor, injector, deadline) -> None:
+        self.domain, self.instance, self.camera, self.protocol = domain, instance, camera, protocol
+        self.executor, self.injector, self.deadline = executor, injector, deadline
+        self.program_seconds = 0.0
+
+    def look(self, k: int) -> dict:
+        """A new observation of the scene as it now is (the camera's physics renders the world;
+        the arm is parked out of view), with the trial's calibrated camera."""
+        scene = _final_scene(self.domain, self.instance, self.executor.model, self.executor.data)
+        return observe(
+            self.domain,
+            scene,
+            self.camera,
+            seed=_seed(self.instance.name, f"look-{k}"),
+            realism=self.protocol.realism,
+            calibration_seed=_seed(self.instance.name, "camera"),
+        )
+
+    def run(self, loop: ClosedLoop, start: Mapping, goal: Mapping, plan: Mapping):
+        from sim.execution import StepFailure
+
+        outcomes: list[dict] = []
+        last_failure: StepFailure | None = None
+        t = time.perf_counter()
+        try:
+            step = loop.adopt(start, goal, plan)
+        except Exception as e:  # a program failing inside the loop ends it, saying so
+            loop.give_up(f"a program failed: {type(e).__name__}: {clip(str(e))}")
+            step = None
+        self.program_seconds += time.perf_counter() - t
+        k = 0
+        while step is not None:
+            if time.perf_counter() > self.deadline:
+                last_failure = StepFailure(step=k, object=step["object"], kind="deadline",
+                                           phase="grasp", reason="the deadline passed")  # fmt: skip
+                loop.give_up("the trial's wall-clock deadline passed")
+                break
+            why: str | None = None
+            if self.injector.skips():
+                ok = True
+            else:
+                ex = self.executor
+                ex.belief = {oid: T for oid, T in loop.belief.items() if oid in ex.meshes}
+                result = ex.execute([step], deadline=self.deadline)
+                for s in result.steps:
+                    outcomes.append({**s.to_dict(), "index": k})
+                ok = result.ok
+                if result.failure is not None:
+                    last_failure = replace(result.failure, step=k)
+                    why = f"{result.failure.kind}: {result.failure.reason}"
+                    if result.failure.kind == "deadline":
+                        loop.give_up("the trial's wall-clock deadline passed")
+                        break
+            k += 1
+            seen = self.look(k)
+            t = time.perf_counter()
+            try:
+                step = loop.report(ok=ok, observation=seen, failure=why)
+            except Exception as e:
+                loop.give_up(f"a program failed: {type(e).__name__}: {clip(str(e))}")
+                step = None
+            self.program_seconds += time.perf_counter() - t
+        if loop.status == "done":
+            last_failure = None
+        return outcomes, last_failure, loop.to_dict()
 
 
 def _states_problem(domain: Domain, out: PolicyOutput) -> tuple[Stage, str] | None:

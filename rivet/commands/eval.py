@@ -18,6 +18,7 @@ from pathlib import Path
 from contracts.errors import UsageError
 from rivet.commands._options import add_sandbox_option, int_at_least
 from rivet.commands._trials import VIEWS, _instances, _policy, cameras_of, protocol_of
+from sim.faults import FAULTS, parse_faults
 
 
 def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: object) -> dict:
@@ -45,6 +46,8 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
         split=args.split,
         sandbox=args.sandbox,
         record_root=str(Path(args.record) / domain_name / view) if args.record else None,
+        loop=args.loop,
+        faults=parse_faults(args.faults),
     )
     summary = run_eval(
         config,
@@ -84,6 +87,12 @@ def run(args: argparse.Namespace) -> int:
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
     names = domains.names() if args.all else [domains.load(args.domain).name]
+    parse_faults(args.faults)  # a usage error before any work
+    if args.loop == "closed" and _policy(args.policy)[0] == "oracle":
+        raise UsageError(
+            "--loop closed needs programs to look again with (--policy artifacts, programs "
+            "DIR or run DIR); the oracle perceives nothing"
+        )
     _check_robot_models()  # a configuration problem is found before the first trial
     kind, folder = _policy(args.policy)
     if kind == "artifacts" and folder is not None:  # a folder of frozen sets, like artifacts/
@@ -111,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         and not args.trials
         and args.split == "dev"
         and protocol_of(args) == HONEST
+        and args.loop == "open"
+        and not args.faults
     ):
         for name in names:
             if "front" in results[name]:
@@ -253,6 +264,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--weld-assist",
         action="store_true",
         help="contact-gated weld assist (see docs/executor.md)",
+    )
+    p.add_argument(
+        "--loop",
+        choices=("open", "closed"),
+        default="open",
+        help="open (default, the paper's protocol): the plan runs to its end; closed: after each "
+        "transfer the robot looks again and replans with the same programs (docs/executor.md)",
+    )
+    p.add_argument(
+        "--faults",
+        default=None,
+        metavar="NAME[,NAME]|all",
+        help=f"inject one fault per trial, drawn from these ({', '.join(FAULTS)})",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=run)

@@ -134,6 +134,9 @@ def test_the_protocol_options_name_what_the_robot_senses(
             ["cubes", "--policy", "artifacts", "cubes"],
             "--policy artifacts cubes: no frozen cubes set",
         ),
+        (["cubes", "--faults", "push,shove"], "--faults: unknown fault 'shove'; known: slip"),
+        (["cubes", "--loop", "closed", "--policy", "oracle"], "--loop closed needs programs"),
+        (["cubes", "--loop", "sideways"], "invalid choice: 'sideways'"),
     ],
 )
 def test_bad_numbers_and_a_missing_domain_exit_2_naming_them(argv, message, capsys):

@@ -1,0 +1,248 @@
+"""The closed loop: act, look again, and plan again when the world is not what was expected.
+
+The paper executes its plans open loop. `ClosedLoop` runs the same frozen programs — no model
+call — around a robot: after each transfer (whether the robot's own sensors said it worked or
+not) the robot looks at the scene again from the same camera, `perceive` reads it, and the loop
+compares what it sees with what it expected (its belief: the perceived start, then where each
+step put its object). Where they differ by more than the domain's scoring tolerance (modulo
+symmetry), or a step failed, the belief takes what was seen and `plan` runs again from there to
+the goal. The goal is perceived once.
+
+Design rule: the loop knows only the observations it is handed and what its programs return.
+It never reads a simulator (a test says so, as for the executor), so a user drives it with
+their own robot exactly as a trial does:
+
+    loop = ClosedLoop(domain, runner)              # runner: perceive / relate / plan
+    step = loop.begin(start_obs, goal_obs)
+    while step is not None:
+        ok = my_robot.transfer(step["object"], step["target_pose"])
+        step = loop.report(ok=ok, observation=my_robot.observe())
+    print(loop.status, loop.reason)                # "done" or "gave_up", and why
+
+Bounded by a `RecoveryBudget` (replans, wall-clock seconds): a loop that would exceed it stops
+with status ``gave_up`` and says which bound it met. An object the new observation does not show
+(hidden behind another) keeps its believed pose.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
+
+import numpy as np
+
+from contracts import se3
+from contracts.limits import clip
+from domains import Domain
+
+Status = Literal["running", "done", "gave_up"]
+
+
+class Programs(Protocol):
+    """What the loop calls: a frozen system's functions (`artifacts.runtime.Runner` is one)."""
+
+    def perceive(self, observation: Mapping[str, Any]) -> list[dict]: ...
+
+    def relate(self, records: list[dict]) -> dict: ...
+
+    def plan(self, start_state: dict, goal_state: dict) -> dict: ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class RecoveryBudget:
+    """How much recovery the loop may spend before giving up.
+
+    Attributes:
+        replans: plans made after the first one.
+        seconds: wall-clock time from `begin` (or `adopt`) to the last step handed out [s].
+    """
+
+    replans: int = 5
+    seconds: float = 300.0
+
+
+@dataclass
+class LoopEvent:
+    """One thing the loop did: looked, replanned, finished or gave up."""
+
+    kind: Literal["observed", "replanned", "done", "gave_up"]
+    step: int  # transfers reported so far
+    detail: str = ""
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "step": self.step, "detail": self.detail}
+
+
+@dataclass
+class ClosedLoop:
+    """Drives a robot with frozen programs until the scene matches the goal or the budget ends.
+
+    Args:
+        domain: the task family (its meshes' symmetries and scoring tolerance).
+        programs: perceive / relate / plan (`Programs`).
+        budget: the recovery budget.
+    """
+
+    domain: Domain
+    programs: Programs
+    budget: RecoveryBudget = field(default_factory=RecoveryBudget)
+    status: Status = "running"
+    reason: str | None = None
+    events: list[LoopEvent] = field(default_factory=list)
+    replans: int = 0
+    observations: int = 0
+    reported: int = 0
+
+    def __post_init__(self) -> None:
+        self.belief: dict[str, np.ndarray] = {}
+        self.meshes: dict[str, str] = {}
+        self.goal: dict | None = None
+        self.remaining: list[dict] = []
+        self._current: dict | None = None
+        self._t0 = time.perf_counter()
+
+    # -- starting -------------------------------------------------------------------------
+
+    def begin(self, start_obs: Mapping[str, Any], goal_obs: Mapping[str, Any]) -> dict | None:
+        """Perceive both observations, plan, and hand out the first step (None: nothing to do,
+        or the plan is infeasible — see `status`)."""
+        start = self._state(self.programs.perceive(start_obs))
+        goal = self._state(self.programs.perceive(goal_obs))
+        return self.adopt(start, goal, self.programs.plan(start, goal))
+
+    def adopt(self, start_state: Mapping, goal_state: Mapping, plan: Mapping) -> dict | None:
+        """Start from states and a plan already made (a trial's open-loop policy output)."""
+        self._t0 = time.perf_counter()
+        self.goal = dict(goal_state)
+        self._believe(start_state.get("objects", []))
+        for r in goal_state.get("objects", []):
+            if isinstance(r, Mapping) and "id" in r and "mesh" in r:
+                self.meshes.setdefault(str(r["id"]), str(r["mesh"]))
+        return self._follow(plan, "the first plan")
+
+    # -- after each transfer ------------------------------------------------------------------
+
+    def report(self, *, ok: bool, observation: Mapping[str, Any], failure: str | None = None
+               ) -> dict | None:  # fmt: skip
+        """The robot carried out the step last handed out (`ok`: its own sensors saw no
+        failure; `failure`: what they said) and looked again: the next step, or None when the
+        loop has ended (`status`)."""
+        if self.status != "running" or self._current is None:
+            raise RuntimeError("report() follows a step handed out by begin/adopt/report")
+        step, self._current = self._current, None
+        self.reported += 1
+        if ok:
+            self.belief[str(step["object"])] = np.asarray(step["target_pose"], float)
+        seen = self.programs.perceive(observation)
+        self.observations += 1
+        off = self._differences(seen)
+        self.events.append(LoopEvent(
+            kind="observed", step=self.reported,
+            detail=("as expected" if not off and ok else
+                    "; ".join(([f"the step failed: {clip(failure or 'no reason', 160)}"]
+                               if not ok else []) + off[:4])),
+        ))  # fmt: skip
+        if ok and not off:
+            return self._next()
+        if self.replans >= self.budget.replans:
+            return self._stop(f"the recovery budget of {self.budget.replans} replans is spent "
+                                 f"({'; '.join(off[:2]) or 'a step failed'})")  # fmt: skip
+        if time.perf_counter() - self._t0 > self.budget.seconds:
+            return self._stop(f"the recovery budget of {self.budget.seconds:g} s is spent")
+        self.replans += 1
+        assert self.goal is not None
+        state = self._state(self._records())
+        return self._follow(self.programs.plan(state, self.goal), f"replan {self.replans}")
+
+    # -- inside -------------------------------------------------------------------------------
+
+    def _state(self, records: list[dict]) -> dict:
+        return {"objects": records, "relations": self.programs.relate(records)}
+
+    def _believe(self, records: Any) -> None:
+        for r in records or []:
+            try:
+                T = se3.as_matrix(r["pose"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if se3.is_rigid(T, tol=1e-3):
+                self.belief[str(r["id"])] = T
+                self.meshes[str(r["id"])] = str(r.get("mesh", ""))
+
+    def _records(self) -> list[dict]:
+        return [
+            {"id": oid, "mesh": self.meshes[oid], "pose": T.tolist()}
+            for oid, T in self.belief.items()
+        ]
+
+    def _differences(self, seen: list[dict]) -> list[str]:
+        """What the observation shows otherwise than believed, beyond the scoring tolerance;
+        the belief takes what was seen there. Unseen objects keep their believed pose."""
+        tol = self.domain.tolerance
+        off = []
+        for r in seen or []:
+            try:
+                oid, T = str(r["id"]), se3.as_matrix(r["pose"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if not se3.is_rigid(T, tol=1e-3):
+                continue
+            mesh = self.meshes.get(oid) or str(r.get("mesh", ""))
+            before = self.belief.get(oid)
+            if before is None:
+                off.append(f"{oid} seen, not believed")
+            else:
+                symmetries = list(self.domain.symmetries(mesh)) if mesh in self.domain.mesh_specs \
+                    else [np.eye(4)]  # fmt: skip
+                if se3.within_tolerance(T, before, trans_tol=tol.translation,
+                                        rot_tol=tol.rotation, symmetries=symmetries):  # fmt: skip
+                    continue
+                t, _ = se3.pose_error(T, before, symmetries)
+                off.append(f"{oid} is {1000 * t:.0f} mm from where it was believed")
+            self.belief[oid] = T
+            self.meshes[oid] = mesh
+        return off
+
+    def _follow(self, plan: Any, which: str) -> dict | None:
+        if not isinstance(plan, Mapping) or plan.get("status") != "ok":
+            why = plan.get("reason") if isinstance(plan, Mapping) else "not a plan"
+            return self._stop(f"{which} says infeasible: {clip(str(why), 200)}")
+        self.remaining = [
+            {"object": str(s["object"]), "target_pose": np.asarray(s["target_pose"], float)}
+            for s in plan.get("steps", [])
+        ]
+        if which != "the first plan":
+            self.events.append(LoopEvent(kind="replanned", step=self.reported,
+                                         detail=f"{which}: {len(self.remaining)} steps"))  # fmt: skip
+        return self._next()
+
+    def _next(self) -> dict | None:
+        if not self.remaining:
+            self.status = "done"
+            self.events.append(LoopEvent(kind="done", step=self.reported))
+            return None
+        if time.perf_counter() - self._t0 > self.budget.seconds:
+            return self._stop(f"the recovery budget of {self.budget.seconds:g} s is spent")
+        self._current = self.remaining.pop(0)
+        return self._current
+
+    def _stop(self, reason: str) -> dict | None:
+        self.give_up(reason)
+        return None
+
+    def give_up(self, reason: str) -> None:
+        """End the loop with status ``gave_up`` and `reason` (also for its driver: a deadline)."""
+        self.status, self.reason = "gave_up", reason
+        self.events.append(LoopEvent(kind="gave_up", step=self.reported, detail=reason))
+
+    def to_dict(self) -> dict:
+        return {
+            "status": self.status,
+            "reason": self.reason,
+            "replans": self.replans,
+            "observations": self.observations,
+            "transfers": self.reported,
+            "events": [e.to_dict() for e in self.events],
+        }
