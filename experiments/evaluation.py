@@ -2,11 +2,17 @@
 
 Trials run in worker processes (`workers`); each worker builds its own domain and policy, so
 nothing crosses process boundaries but instance names and JSON results.
+
+Every finished trial is appended to a trial log (`TrialLog`, JSON lines, fsynced) as it
+finishes: an interrupted run keeps what it finished, and `resume` continues it, running only
+the trials the log does not hold. The log's first line is the evaluation's configuration; a
+log of another configuration is refused, never mixed in.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import sys
 from collections import Counter
@@ -111,6 +117,59 @@ def _run_one(instance_json: dict) -> dict:
     return result
 
 
+class TrialLog:
+    """One evaluation's trial results as JSON lines: a header with its configuration, then
+    one line per finished trial, each on disk (fsynced) before the next one counts.
+
+    Args:
+        path: the log file.
+        header: what identifies the evaluation (configuration, set hash, trial names).
+        resume: keep the trials an earlier log of the same evaluation holds; else start anew.
+    Raises:
+        UsageError: resuming a log of another evaluation.
+    """
+
+    def __init__(self, path: Path, header: dict, *, resume: bool) -> None:
+        from contracts import to_jsonable
+        from contracts.errors import UsageError
+
+        self.path = path
+        self.header = json.loads(json.dumps(to_jsonable(header)))
+        self.kept: dict[str, dict] = {}
+        if resume and path.is_file():
+            lines = self._lines()
+            if not lines or lines[0].get("evaluation") != self.header:
+                raise UsageError(
+                    f"--resume: {path} is the log of another evaluation (another policy, "
+                    "set, camera, split, protocol, loop, faults or trial list); run without "
+                    "--resume to start anew"
+                )
+            self.kept = {r["name"]: r for r in lines[1:] if "name" in r}
+        else:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with open(path, "w") as f:
+                f.write(json.dumps({"evaluation": self.header}) + "\n")
+
+    def earlier(self) -> int:
+        """Trials an earlier, unfinished log at this path holds (0: none)."""
+        return len(self.kept)
+
+    def _lines(self) -> list[dict]:
+        out = []
+        for line in self.path.read_text().splitlines():
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                break  # a torn last line from a kill mid-write: everything before it holds
+        return out
+
+    def add(self, result: dict) -> None:
+        with open(self.path, "a") as f:
+            f.write(json.dumps(result) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+
+
 def run_eval(
     config: EvalConfig,
     instances: Sequence[dict],
@@ -118,28 +177,46 @@ def run_eval(
     workers: int = 1,
     progress: Callable[[dict], None] | None = None,
     ray_address: str | None = None,
+    log: TrialLog | None = None,
 ) -> dict:
     """Run every instance (JSON dicts) and summarise; results keep the instances' order.
 
     `ray_address` fans the trials out to Ray actors (see `experiments.scaleout`) instead of local
-    processes.
+    processes. `log`: each finished trial is appended to it, and the trials it already holds
+    (a resumed run) are not run again.
     """
     results: dict[int, dict] = {}
-    if ray_address is not None:
+    todo: list[tuple[int, dict]] = []
+    for i, inst in enumerate(instances):
+        kept = log.kept.get(inst.get("name", "")) if log is not None else None
+        if kept is not None:
+            results[i] = kept
+            if progress:
+                progress(kept)
+        else:
+            todo.append((i, inst))
+
+    def done(i: int, result: dict) -> None:
+        results[i] = result
+        if log is not None:
+            log.add(result)
+        if progress:
+            progress(result)
+
+    if not todo:
+        pass
+    elif ray_address is not None:
         from experiments.scaleout import map_with_actors
 
-        for i, result in map_with_actors(
-            ray_address, _init_worker, config, _run_one, list(instances), workers=workers
+        order = [i for i, _ in todo]
+        for k, result in map_with_actors(
+            ray_address, _init_worker, config, _run_one, [inst for _, inst in todo], workers=workers
         ):
-            results[i] = result
-            if progress:
-                progress(result)
+            done(order[k], result)
     elif workers <= 1:
         _init_worker(config)
-        for i, inst in enumerate(instances):
-            results[i] = _run_one(inst)
-            if progress:
-                progress(results[i])
+        for i, inst in todo:
+            done(i, _run_one(inst))
     else:
         import multiprocessing as mp
 
@@ -147,11 +224,9 @@ def run_eval(
         with ProcessPoolExecutor(
             workers, mp_context=ctx, initializer=_init_worker, initargs=(config,)
         ) as pool:
-            futures = {pool.submit(_run_one, inst): i for i, inst in enumerate(instances)}
+            futures = {pool.submit(_run_one, inst): i for i, inst in todo}
             for fut in as_completed(futures):
-                results[futures[fut]] = fut.result()
-                if progress:
-                    progress(results[futures[fut]])
+                done(futures[fut], fut.result())
     per_trial = [results[i] for i in range(len(instances))]
     return summarise(config, per_trial)
 

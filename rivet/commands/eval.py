@@ -22,8 +22,10 @@ from sim.faults import FAULTS, parse_faults
 
 
 def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: object) -> dict:
+    from dataclasses import asdict
+
     import domains
-    from experiments.evaluation import EvalConfig, progress_bar, run_eval, table
+    from experiments.evaluation import EvalConfig, TrialLog, progress_bar, run_eval, table
 
     domain = domains.load(domain_name)
     policy = _policy(args.policy)
@@ -49,17 +51,49 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
         loop=args.loop,
         faults=parse_faults(args.faults),
     )
-    summary = run_eval(
-        config,
-        instances,
-        workers=args.workers,
-        ray_address=args.ray,
-        progress=None if args.quiet else progress_bar(len(instances), f"{domain_name}/{view}"),
+    path = _log_path(args, domain_name, view)
+    log = TrialLog(
+        path,
+        {
+            **{k: v for k, v in asdict(config).items() if k not in ("sandbox", "record_root")},
+            "set_hash": set_hash,
+            "trials": [inst.get("name") for inst in instances],
+        },
+        resume=args.resume,
     )
+    if not args.quiet:
+        kept = f": {log.earlier()} of {len(instances)} trials kept" if args.resume else ""
+        print(f"trial log {path}{kept}", file=sys.stderr)
+    try:
+        summary = run_eval(
+            config,
+            instances,
+            workers=args.workers,
+            ray_address=args.ray,
+            progress=None if args.quiet else progress_bar(len(instances), f"{domain_name}/{view}"),
+            log=log,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"the finished trials are kept in {path}; the same command with --resume runs the rest",
+            file=sys.stderr,
+        )
+        raise
     print(table(summary))
     if set_hash is not None:
         summary["set_hash"] = set_hash  # which programs ran
     return summary
+
+
+def _log_path(args: argparse.Namespace, domain: str, view: str) -> Path:
+    """Where an evaluation's trials are streamed: beside `--json OUT` (OUT's stem, the domain
+    and the view), else under runs/eval/ (like `rivet author`'s runs/)."""
+    if args.json:
+        out = Path(args.json)
+        return out.with_name(f"{out.stem}.{domain}.{view}.trials.jsonl")
+    kind = _policy(args.policy)[0]
+    extra = ("-closed" if args.loop == "closed" else "") + ("-faults" if args.faults else "")
+    return Path("runs") / "eval" / domain / f"{view}-{args.split}-{kind}{extra}.trials.jsonl"
 
 
 def _check_robot_models() -> None:
@@ -277,6 +311,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="NAME[,NAME]|all",
         help=f"inject one fault per trial, drawn from these ({', '.join(FAULTS)})",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted evaluation: the trials its trial log holds are kept, the "
+        "rest are run (the log is beside --json OUT, else under runs/eval/)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=run)

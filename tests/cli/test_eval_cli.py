@@ -207,3 +207,43 @@ def test_sigterm_stops_an_evaluation_like_ctrl_c_and_removes_its_containers(tmp_
     assert proc.returncode == 143, err[-2000:]
     assert "terminated" in err and "Traceback" not in err, err[-2000:]
     assert owned() == [], [c.name for c in owned()]
+
+
+@pytest.mark.slow
+def test_an_interrupted_evaluation_keeps_its_trials_and_resume_runs_only_the_rest(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "oracle.json"
+    log = tmp_path / "oracle.cubes.front.trials.jsonl"
+    argv = [RIVET, "eval", "cubes", "--policy", "oracle", "--trials", "3", "--json", str(out)]
+    proc = subprocess.Popen(
+        [*argv, "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO
+    )
+    lines: list[str] = []
+    while proc.poll() is None and len(lines) < 2:  # the header and one finished trial
+        time.sleep(0.2)
+        lines = log.read_text().splitlines() if log.is_file() else []
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-2000:]
+    assert f"the finished trials are kept in {log}" in err and "Traceback" not in err
+    kept = [json.loads(line) for line in log.read_text().splitlines()]
+    assert kept[0]["evaluation"]["trials"][:1] == ["goal01_start1"] and len(kept) in (2, 3)
+    assert not out.exists()
+
+    again = subprocess.run([*argv, "--resume"], capture_output=True, text=True, cwd=REPO)
+    assert again.returncode in (0, 1), again.stderr[-2000:]
+    assert f"{len(kept) - 1} of 3 trials kept" in again.stderr
+    summary = json.loads(out.read_text())
+    assert [t["name"] for t in summary["per_trial"]] == kept[0]["evaluation"]["trials"]
+    assert summary["per_trial"][0] == kept[1]  # kept, not run again
+    assert len(log.read_text().splitlines()) == 4  # header + 3 trials, none twice
+
+    other = subprocess.run(  # a log of another evaluation is refused, not mixed in
+        [*argv, "--resume", "--loop", "open", "--faults", "push"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert other.returncode == 2 and "is the log of another evaluation" in other.stderr
