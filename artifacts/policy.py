@@ -13,6 +13,7 @@ one authoring run (`RUN_DIR/frozen/`, as `rivet author` writes it). A reliabilit
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -53,7 +54,13 @@ class ProgramPolicy:
         start, goal = run.last_states or (None, None)
         timings = dict(run.timings)
         timings.update({f"cpu_{k}": v for k, v in run.cpu.items()})
-        return PolicyOutput(plan=plan, start_state=start, goal_state=goal, timings=timings)
+        t = time.perf_counter()
+        fit = {
+            side: _fit(domain, obs, state, run)
+            for side, obs, state in (("start", start_obs, start), ("goal", goal_obs, goal))
+        }
+        timings["fit"] = time.perf_counter() - t
+        return PolicyOutput(plan=plan, start_state=start, goal_state=goal, timings=timings, fit=fit)
 
     def programs(self) -> Runner:
         """The programs' session, for the closed loop (`sim.loop`): perceive, relate, plan."""
@@ -67,6 +74,19 @@ class ProgramPolicy:
     def close(self) -> None:
         self.reset()
         self.executor.close()
+
+
+def _fit(domain: Any, observation: dict, state: dict | None, run: Runner) -> dict:
+    """What `rivet solve` judges by (`artifacts.fit`), for the trial's JSON: how well the
+    perceived state explains the observation."""
+    from artifacts.fit import scene_fit
+
+    if state is None:
+        return {"ok": None, "problems": ["nothing was perceived"]}
+    try:
+        return scene_fit(domain, observation, state["objects"], run.render).to_dict()
+    except Exception as e:  # the frozen render's fault: no judgement, said so
+        return {"ok": None, "problems": [f"the fit cannot be judged: {type(e).__name__}: {e}"]}
 
 
 def make_policy(domain: str, spec: PolicySpec, *, sandbox: str = "docker") -> Any:

@@ -100,6 +100,11 @@ class Runner:
             )
         return got.value, got
 
+    def render(self, records: list[dict], camera: Mapping[str, Any]) -> dict:
+        """The frozen `render` of `records` from `camera`: {"rgb", "depth", "mask"}."""
+        value, _ = self._call("render", records, MESHES, camera)
+        return value
+
     def perceive(self, observation: Mapping[str, Any]) -> list[dict]:
         obs = {k: observation[k] for k in ("rgb", "depth", "camera")}
         value, _ = self._call("perceive", obs, MESHES, obs["camera"])

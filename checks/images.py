@@ -173,7 +173,8 @@ _PALETTE = np.array(
 )
 
 
-def _tint(rgb: np.ndarray, mask: np.ndarray, alpha: float = 0.55) -> np.ndarray:
+def tint(rgb: np.ndarray, mask: np.ndarray, alpha: float = 0.55) -> np.ndarray:
+    """`rgb` with each object index of `mask` (-1: none) tinted in its palette colour."""
     out = rgb.astype(np.float32).copy()
     for k in np.unique(mask):
         if k < 0:
@@ -212,7 +213,7 @@ def overlay(
     if candidate_rgb is not None:
         middle = _resize_nearest(np.asarray(candidate_rgb, np.uint8), shape)
     else:
-        middle = _tint(ref_rgb // 2 + 64, cand)
+        middle = tint(ref_rgb // 2 + 64, cand)
     diff = np.full((*shape, 3), 40, np.uint8)
     ref = np.asarray(reference_mask)
     diff[(ref >= 0) & (ref == cand)] = (235, 235, 235)

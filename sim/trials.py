@@ -119,6 +119,7 @@ class PolicyOutput:
     start_state: dict | None  # {"objects", "relations"} as perceived; None for the oracle
     goal_state: dict | None
     timings: dict[str, float] = field(default_factory=dict)  # [s]
+    fit: dict | None = None  # per side, how well the perceived state explains the image
 
 
 class OraclePolicy:
@@ -181,6 +182,7 @@ class TrialResult:
     plan_failure: str | None = None  # why the plan failed its abstract check, when it did
     loop: dict | None = None  # the closed loop's record (`sim.loop.ClosedLoop.to_dict`)
     fault: dict | None = None  # the injected fault and what it did (`sim.faults.Fault`)
+    fit: dict | None = None  # the policy's fit of each perceived state (`artifacts.fit`)
 
     def to_dict(self) -> dict:
         return {
@@ -196,6 +198,7 @@ class TrialResult:
             "plan_failure": self.plan_failure,
             **({"loop": self.loop} if self.loop is not None else {}),
             **({"fault": self.fault} if self.fault is not None else {}),
+            **({"fit": self.fit} if self.fit is not None else {}),
         }
 
 
@@ -309,7 +312,8 @@ def run_trial(
             steps=[],
             object_errors=[],
         )
-    timings["policy"] = time.perf_counter() - t
+    # the policy's own time: without judging its fit (for the trial's JSON, not for planning)
+    timings["policy"] = time.perf_counter() - t - out.timings.get("fit", 0.0)
     timings.update({f"policy_{k}": v for k, v in out.timings.items()})
     if bad_state := _states_problem(domain, out):  # before scoring: its geometry is pairwise
         return TrialResult(
@@ -496,6 +500,7 @@ def run_trial(
         plan_failure=plan_failure,
         loop=loop_record,
         fault=None if fault is None else fault.to_dict(),
+        fit=out.fit,
     )
 
 

@@ -18,7 +18,6 @@ from pathlib import Path
 from contracts.errors import UsageError
 from rivet.commands._options import add_sandbox_option, int_at_least
 from rivet.commands._trials import VIEWS, _instances, _policy, cameras_of, protocol_of
-from sim.faults import FAULTS, parse_faults
 
 
 def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: object) -> dict:
@@ -26,6 +25,7 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
 
     import domains
     from experiments.evaluation import EvalConfig, TrialLog, progress_bar, run_eval, table
+    from sim.faults import parse_faults
 
     domain = domains.load(domain_name)
     policy = _policy(args.policy)
@@ -121,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.all and args.domain is None:
         raise UsageError("name a DOMAIN or pass --all")
     names = domains.names() if args.all else [domains.load(args.domain).name]
+    from sim.faults import parse_faults
+
     parse_faults(args.faults)  # a usage error before any work
     if args.loop == "closed" and _policy(args.policy)[0] == "oracle":
         raise UsageError(
@@ -310,7 +312,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--faults",
         default=None,
         metavar="NAME[,NAME]|all",
-        help=f"inject one fault per trial, drawn from these ({', '.join(FAULTS)})",
+        help="inject one fault per trial, drawn from these (slip, push, move, bias, skip: "
+        "sim.faults.FAULTS, docs/executor.md)",
     )
     p.add_argument(
         "--resume",

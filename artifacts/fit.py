@@ -1,0 +1,210 @@
+"""How well a perceived state explains its observation: what lets `rivet solve` know it is lost.
+
+The perceived records are rendered by the set's own frozen `render` (the function the image
+checks hold to the reference renderer) from the observation's calibrated camera, and compared
+with the observed depth:
+
+- the observation's *foreground*: pixels whose observed depth is `FOREGROUND_M` or more in
+  front of the table plane z = 0 (something stands there; the plane is fitted to the observed
+  table first, which the calibration error tilts by a few millimetres);
+- per object, its *support* — the share of its rendered pixels the observation shows as
+  foreground — and its *residual*, the median |observed − rendered depth| over those pixels;
+- *unexplained*: the share of the foreground no perceived object covers (parts the programs
+  did not see, or objects of another domain).
+
+A state fits when every object keeps `SUPPORT_MIN` and `RESIDUAL_MAX_M` and at most
+`UNEXPLAINED_MAX` of the foreground is unexplained; `SceneFit.problems` says what does not, worst
+first. The bounds sit well outside what the frozen programs produce on the dev split's
+observations (docs/results.md, "rivet solve's fit"), so that a refusal means the images are
+not of the domain, or the programs are lost on them — not a few millimetres of error.
+
+Design rule: numpy only, like the rest of the thin runtime (no simulator in `rivet solve`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from contracts import se3
+
+FOREGROUND_M = 0.004  # [m] in front of the bare table: something is there
+SUPPORT_MIN = 0.5  # per object: share of its rendered pixels the observation shows as foreground
+RESIDUAL_MAX_M = 0.015  # [m] per object: median |observed − rendered depth| on its pixels
+UNEXPLAINED_MAX = 0.25  # share of the observed foreground no perceived object covers
+MIN_PIXELS = 30  # [px] objects rendered smaller than this (hidden) are not judged
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectFit:
+    id: str
+    mesh: str
+    pixels: int  # rendered and visible [px]
+    support: float | None  # None: too few pixels to judge
+    residual_m: float | None
+
+    def to_dict(self) -> dict:
+        return {
+            "id": self.id,
+            "mesh": self.mesh,
+            "pixels": self.pixels,
+            "support": None if self.support is None else round(self.support, 3),
+            "residual_m": None if self.residual_m is None else round(self.residual_m, 4),
+        }
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneFit:
+    objects: list[ObjectFit]
+    foreground_px: int
+    unexplained: float  # share of the foreground
+    problems: list[str]
+    mask: np.ndarray  # (H, W) rendered object index, -1 none
+    foreground: np.ndarray  # (H, W) bool
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+    def to_dict(self) -> dict:
+        return {
+            "ok": self.ok,
+            "problems": self.problems,
+            "unexplained": round(self.unexplained, 3),
+            "foreground_px": self.foreground_px,
+            "objects": [o.to_dict() for o in self.objects],
+        }
+
+
+Render = Callable[[list[dict], Mapping[str, Any]], Mapping[str, Any]]
+"""`render(records, camera) -> {"depth", "mask"}`: the frozen `render` (mask: record index)."""
+
+
+def scene_fit(
+    domain: Any, observation: Mapping[str, Any], records: Sequence[Mapping], render: Render
+) -> SceneFit:
+    """The fit of `records` (what `perceive` returned) to `observation` (see the module)."""
+    camera = observation["camera"]
+    depth = np.asarray(observation["depth"], float)
+    problems: list[str] = []
+    known: list[dict[str, Any]] = []
+    unknown: list[str] = []
+    for r in records:
+        mesh = str(r.get("mesh", ""))
+        try:
+            T = se3.as_matrix(r["pose"])
+        except (KeyError, TypeError, ValueError):
+            unknown.append(f"{r.get('id')!r} has no pose")
+            continue
+        if mesh not in domain.mesh_specs:
+            unknown.append(f"{r.get('id')!r} has mesh {mesh!r}, not one of {domain.name}'s")
+            continue
+        known.append({"id": str(r["id"]), "mesh": mesh, "pose": T.tolist()})
+    problems += unknown
+    h, w = depth.shape
+    table = table_depth(camera, (h, w))
+    valid = np.isfinite(depth) & (depth > 0)
+    foreground = valid & (table > 0) & (depth < table - FOREGROUND_M + _table_offset(depth, table))
+    mask = np.full((h, w), -1, np.int32)
+    rendered = np.zeros((h, w))
+    if known:
+        images = render(known, camera)
+        mask = np.asarray(images["mask"]).astype(np.int32)
+        rendered = np.asarray(images["depth"], float)
+        if mask.shape != (h, w) or rendered.shape != (h, w):
+            raise ValueError(f"the frozen render drew {mask.shape} for a {h}×{w} observation")
+    fits = []
+    for k, o in enumerate(known):
+        mine = (mask == k) & valid
+        n = int(mine.sum())
+        if n < MIN_PIXELS:
+            fits.append(ObjectFit(id=o["id"], mesh=o["mesh"], pixels=n, support=None,
+                                  residual_m=None))  # fmt: skip
+            continue
+        support = float((mine & foreground).sum()) / n
+        residual = float(np.median(np.abs(depth[mine] - rendered[mine])))
+        fits.append(ObjectFit(id=o["id"], mesh=o["mesh"], pixels=n, support=support,
+                              residual_m=residual))  # fmt: skip
+    for f in sorted(fits, key=lambda f: -(f.residual_m or 0.0)):
+        if f.support is not None and f.support < SUPPORT_MIN:
+            problems.append(
+                f"{f.id!r} ({f.mesh}): only {100 * f.support:.0f} % of where it was perceived "
+                f"shows anything above the table (at least {100 * SUPPORT_MIN:.0f} % expected)"
+            )
+        elif f.residual_m is not None and f.residual_m > RESIDUAL_MAX_M:
+            problems.append(
+                f"{f.id!r} ({f.mesh}): the observed depth differs from its perceived shape by "
+                f"{1000 * f.residual_m:.0f} mm (median; at most {1000 * RESIDUAL_MAX_M:.0f} mm)"
+            )
+    fg = int(foreground.sum())
+    unexplained = float((foreground & (mask < 0)).sum()) / fg if fg else 0.0
+    if unexplained > UNEXPLAINED_MAX:
+        problems.append(
+            f"{100 * unexplained:.0f} % of what stands on the table is explained by no perceived "
+            f"object (at most {100 * UNEXPLAINED_MAX:.0f} %): objects missed, or not "
+            f"{domain.name} objects"
+        )
+    if not known and fg:
+        problems.insert(0, f"nothing of {domain.name} was perceived, but something stands there")
+    return SceneFit(objects=fits, foreground_px=fg, unexplained=unexplained, problems=problems,
+                    mask=mask, foreground=foreground)  # fmt: skip
+
+
+def table_depth(camera: Mapping[str, Any], shape: tuple[int, int]) -> np.ndarray:
+    """Depth [m] of the table plane z = 0 at each pixel of `camera` (0 where it is not seen)."""
+    h, w = shape
+    K = np.asarray(camera["K"], float)
+    T = np.asarray(camera["T_world_camera"], float)
+    v, u = np.mgrid[0:h, 0:w].astype(float)
+    y = (v - K[1, 2]) / K[1, 1]
+    x = (u - K[0, 2] - K[0, 1] * y) / K[0, 0]
+    ray_z = T[2, 0] * x + T[2, 1] * y + T[2, 2]  # world z per unit of depth
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = -T[2, 3] / ray_z
+    return np.where(np.isfinite(depth) & (depth > 0), depth, 0.0)
+
+
+def _table_offset(depth: np.ndarray, table: np.ndarray, step: int = 4) -> np.ndarray:
+    """Where the observed table lies relative to the table plane's depth, per pixel (an affine
+    fit in the image on every `step`-th pixel, robust to what stands on it): the calibrated
+    camera is off the true one by a few millimetres and tenths of a degree, which tilts the
+    whole table in depth."""
+    h, w = depth.shape
+    r = (depth - table)[::step, ::step]
+    v, u = np.mgrid[0:h:step, 0:w:step]
+    use = np.isfinite(r) & (depth[::step, ::step] > 0) & (table[::step, ::step] > 0)
+    use &= np.abs(r) < 0.02
+    A = np.stack([np.ones(u.size), u.ravel() / w, v.ravel() / h], axis=1)
+    coef = np.zeros(3)
+    for tol in (0.01, 0.004, 0.002):
+        sel = use.ravel()
+        if sel.sum() < 100:
+            break
+        coef, *_ = np.linalg.lstsq(A[sel], r.ravel()[sel], rcond=None)
+        use = use & (np.abs(r - (A @ coef).reshape(r.shape)) < tol)
+    V, U = np.mgrid[0:h, 0:w]
+    return coef[0] + coef[1] * U / w + coef[2] * V / h
+
+
+def fit_overlay(observation: Mapping[str, Any], fit: SceneFit) -> np.ndarray:
+    """The observation with each perceived object's silhouette tinted over it (labelled with
+    its id) and the foreground no object explains in magenta: what a person checks a refusal,
+    or a plan, by."""
+    import cv2
+
+    from checks.images import tint
+
+    out = tint(np.asarray(observation["rgb"], np.uint8), fit.mask, alpha=0.45)
+    out[fit.foreground & (fit.mask < 0)] = (255, 0, 255)
+    for k, o in enumerate(fit.objects):
+        ys, xs = np.nonzero(fit.mask == k)
+        if len(xs):
+            label = "".join(c if 32 <= ord(c) < 127 else "?" for c in o.id)
+            at = (int(xs.mean()) - 4 * len(label), int(ys.mean()))
+            cv2.putText(out, label, at, cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 3, cv2.LINE_AA)
+            cv2.putText(out, label, at, cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1,
+                        cv2.LINE_AA)  # fmt: skip
+    return out
