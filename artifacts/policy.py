@@ -130,12 +130,16 @@ class AuthoringRunFolder:
         name: the folder relative to the runs folder searched (e.g. `cubes/20260101-120000`).
         finished: the run's journal says it finished and every function is in `frozen/`.
         reason: why the run did not finish (None when it did).
+        started: the run made a model call (or froze something); a folder with no journal, or
+            whose journal stops before any call (its options or credentials were refused),
+            is a run that never started: not an authoring attempt, so not a failed one.
     """
 
     name: str
     path: Path
     finished: bool
     reason: str | None = None
+    started: bool = True
 
     @property
     def policy(self) -> PolicySpec | None:
@@ -188,18 +192,20 @@ def _run_folder(domain: str, runs_dir: Path, path: Path) -> AuthoringRunFolder:
 
     name = str(path.relative_to(runs_dir))
 
-    def failed(reason: str) -> AuthoringRunFolder:
-        return AuthoringRunFolder(name, path, False, reason)
+    def failed(reason: str, *, started: bool = True) -> AuthoringRunFolder:
+        return AuthoringRunFolder(name, path, False, reason, started)
 
     journal = path / "journal.jsonl"
     if not journal.is_file():
-        return failed("no journal.jsonl: the run never started")
+        return failed("no journal.jsonl: the run never started", started=False)
     events = _events(journal)
     started = next((e for e in events if e.get("event") == "started"), None)
     if started is not None:
         other = started.get("config", {}).get("domain")
         if other not in (None, domain):
             return failed(f"a run of {other}, not {domain}")
+    if not any(e.get("event") not in ("started",) for e in events):
+        return failed("the run never started: its journal holds no call", started=False)
     frozen = [e["function"] for e in events if e.get("event") == "frozen"]
     if not any(e.get("event") == "finished" for e in events):
         last = events[-1] if events else {}

@@ -3,7 +3,8 @@ run's final programs on the same first K start/goal pairs of a split (paper: 10 
 pairs), summarised per run and pooled.
 
 A run that did not finish authoring has no programs: it is listed as a failed run with its
-reason, never dropped. The pooled figures are given twice: over all runs, where each pair of
+reason, never dropped. A run that never started (no model call: its options or credentials
+were refused) is no authoring attempt: it is listed apart and counted nowhere. The pooled figures are given twice: over all runs, where each pair of
 a failed run counts as a failure (the reliability of authoring and solving together), and
 over the finished runs alone (how good the systems are that authoring produced).
 
@@ -33,6 +34,7 @@ class StudyRun:
     name: str
     policy: PolicySpec | None
     reason: str | None = None
+    started: bool = True  # False: the run never made a call (not counted, listed apart)
 
 
 def counts(trials: Sequence[dict], *, failed_pairs: int = 0) -> dict[str, Any]:
@@ -60,6 +62,10 @@ def run_study(
     `progress(run_name, trials)` may return a per-trial callback (e.g. a progress bar)."""
     per_run: list[dict] = []
     for run in runs:
+        if not run.started:
+            per_run.append({"run": run.name, "reason": run.reason, "summary": None,
+                            "started": False})  # fmt: skip
+            continue
         summary = None
         if run.policy is not None:
             try:
@@ -94,7 +100,12 @@ def summarise_study(config: EvalConfig, per_run: list[dict], pairs: list[str]) -
     all_trials: list[dict] = []
     finished_trials: list[dict] = []
     failed_pairs = 0
+    never_started = [
+        {"run": e["run"], "reason": e.get("reason")} for e in per_run if not e.get("started", True)
+    ]
     for entry in per_run:
+        if not entry.get("started", True):
+            continue
         summary = entry["summary"]
         row: dict[str, Any] = {"run": entry["run"], "finished": summary is not None}
         if summary is None:
@@ -132,6 +143,7 @@ def summarise_study(config: EvalConfig, per_run: list[dict], pairs: list[str]) -
             "max": max(per_run_final) if per_run_final else None,
         },
         "runs": runs_out,
+        "never_started": never_started,
     }
 
 
@@ -188,4 +200,10 @@ def study_table(study: dict) -> str:
         )
     )
     lines.append("  * a run that did not finish authoring counts each of its pairs as failed")
+    if study.get("never_started"):
+        lines.append(
+            f"  not counted: {len(study['never_started'])} folder(s) of runs that never started "
+            "(no model call)"
+        )
+        lines += [f"    {r['run']}: {r['reason']}" for r in study["never_started"]]
     return "\n".join(lines)

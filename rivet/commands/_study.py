@@ -45,7 +45,10 @@ def run_study_command(args: argparse.Namespace) -> int:
     ((view, camera),) = cams
     domain = domains.load(args.domain)
     assert runs_dir is not None
-    runs = [StudyRun(r.name, r.policy, r.reason) for r in find_runs(domain.name, Path(runs_dir))]
+    runs = [
+        StudyRun(r.name, r.policy, r.reason, r.started)
+        for r in find_runs(domain.name, Path(runs_dir))
+    ]
     args.trials = pairs  # the first K pairs, exactly as `--trials K` picks trials
     instances = _instances(domain, args)
     config = EvalConfig(

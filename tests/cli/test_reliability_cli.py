@@ -94,6 +94,12 @@ def study(tmp_path_factory):
     with pytest.raises(AuthoringExhausted):
         author(runs, {**reference, "plan": NEVER_PASSES + reference["plan"]}, attempts=1)
     exhausted = sorted((runs / "cubes").iterdir())[-1]
+    # folders of runs that never started: no journal; a journal refused before any call
+    (runs / "cubes" / "0-no-journal").mkdir()
+    (runs / "cubes" / "0-no-call").mkdir()
+    (runs / "cubes" / "0-no-call" / "journal.jsonl").write_text(
+        json.dumps({"event": "started", "config": {"domain": "cubes"}}) + "\n"
+    )
     out = runs.parent / "study.json"
     proc = subprocess.run(
         [
@@ -165,8 +171,12 @@ def test_each_run_is_evaluated_on_the_first_k_pairs_and_pooled(study):
     assert (fin["runs"], fin["trials"]) == (2, 2 * K)
     assert (fin["state_ok"], fin["plan_ok"], fin["final_ok"]) == (2 * K, K, K)
     assert data["runs_solving_every_pair"] == 1
+    # the runs that never started are listed apart, counted nowhere
+    assert [r["run"] for r in data["never_started"]] == ["cubes/0-no-call", "cubes/0-no-journal"]
+    assert "journal holds no call" in data["never_started"][0]["reason"]
 
     table = proc.stdout
+    assert "not counted: 2 folder(s) of runs that never started" in table
     assert f"3 runs × {K} pairs" in table
     assert f"{names[exhausted]}" in table and "FAILED" in table
     pooled_row = next(line for line in table.splitlines() if "pooled, all 3 runs" in line)
@@ -231,5 +241,6 @@ def test_every_run_folder_is_a_run_finished_or_failed_with_its_reason(tmp_path):
     ok = found["ray-001/cubes/e-done"]
     assert ok.finished and ok.reason is None and ok.policy == ("run", str(done))
     assert [r.policy for n, r in found.items() if n != ok.name] == [None] * 4
+    assert [n for n, r in found.items() if not r.started] == ["cubes/b-no-journal"]
     # the <domain>/ folder itself names its runs without the prefix
     assert [r.name for r in find_runs("cubes", runs / "cubes")][:2] == ["a-killed", "b-no-journal"]
