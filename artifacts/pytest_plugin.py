@@ -7,6 +7,7 @@ committed artifacts' property suites in CI.
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -47,6 +48,14 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         help="the seed the check cases are drawn from: 'frozen' (default) the cases each "
         "program passed on when it was frozen (its manifest's), so that CI repeats; 'fresh' "
         "new cases each run (a failure names their seed); or a number",
+    )
+    group.addoption(
+        "--rivet-images",
+        metavar="DIR",
+        default="rivet-check-images",
+        help="where a failing suite's case images go, DIR/<domain>/<function>/ (overlays of the "
+        "cases it got wrong, for a CI job to upload); a passing suite leaves none "
+        "(default: rivet-check-images/)",
     )
     group.addoption(
         "--rivet-sandbox",
@@ -134,6 +143,8 @@ class CheckItem(pytest.Item):
 
             self._executors[backend] = sandbox.open_executor(backend)
         deps = {d: src for d, src in sources.items() if d != self.program}
+        images = Path(self.config.getoption("--rivet-images")) / self.domain / self.program
+        shutil.rmtree(images, ignore_errors=True)  # what an earlier run left is not this one's
         report = run_checks(
             self.domain,
             self.program,
@@ -141,11 +152,22 @@ class CheckItem(pytest.Item):
             deps=deps,
             executor=self._executors[backend],
             cases_seed=_seed(self.config, manifest, self.program),
+            out_dir=images,
         )
-        if not report["passed"]:
-            raise CheckFailed(
-                report_markdown(report) + f"\n\n(cases drawn from seed {report['cases_seed']})"
+        if report["passed"]:
+            shutil.rmtree(images, ignore_errors=True)
+            return
+        pictures = sorted(images.rglob("*.png")) if images.is_dir() else []
+        raise CheckFailed(
+            report_markdown(report)
+            + f"\n\n(cases drawn from seed {report['cases_seed']})"
+            + (
+                f"\n\nimages of the failing cases ({len(pictures)}), under {images}/:\n"
+                + "\n".join(f"  {p}" for p in pictures[:20])
+                if pictures
+                else ""
             )
+        )
 
     def repr_failure(self, excinfo, style=None):
         from artifacts.errors import ArtifactError

@@ -72,3 +72,32 @@ def test_an_integrity_failure_is_one_readable_line(tmp_path):
     assert bad.returncode == 1
     assert "refusing to load a modified artifact" in bad.stdout
     assert "Traceback" not in bad.stdout and "raise ArtifactError" not in bad.stdout, bad.stdout
+
+
+def test_a_failing_suite_leaves_its_case_images_for_ci_and_a_passing_one_none(tmp_path):
+    from artifacts import build_manifest, freeze
+    from artifacts.runtime import read_programs
+
+    sources = read_programs(REPO / "artifacts" / "cubes")
+    sources["render"] += (
+        "\n\n_right = render\n\n\ndef render(records, meshes, camera):  # 2 cm too deep\n"
+        "    out = dict(_right(records, meshes, camera))\n"
+        "    out['depth'] = out['depth'] + 0.02 * (out['depth'] > 0)\n"
+        "    return out\n"
+    )
+    manifest = build_manifest("cubes", sources, author={"kind": "people", "names": ["tests"]})
+    freeze("cubes", sources, manifest, root=tmp_path / "sets")
+    images = tmp_path / "images"
+    bad = _pytest(tmp_path / "sets", "-q", "-k", "render", "--rivet-sandbox", "local",
+                  "--rivet-images", str(images))  # fmt: skip
+    assert bad.returncode == 1, bad.stdout + bad.stderr
+    pictures = sorted((images / "cubes" / "render").rglob("*.png"))
+    assert pictures, bad.stdout
+    assert f"images of the failing cases ({len(pictures)}), under {images}/cubes/render/" in (
+        bad.stdout
+    )
+    assert str(pictures[0]) in bad.stdout
+    ok = _pytest(REPO / "artifacts", "-q", "-k", "cubes and render", "--rivet-sandbox", "local",
+                 "--rivet-images", str(images))  # fmt: skip
+    assert ok.returncode == 0, ok.stdout + ok.stderr
+    assert not (images / "cubes" / "render").exists()  # passed: nothing left behind
