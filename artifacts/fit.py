@@ -35,7 +35,8 @@ FOREGROUND_M = 0.004  # [m] in front of the bare table: something is there
 SUPPORT_MIN = 0.5  # per object: share of its rendered pixels the observation shows as foreground
 RESIDUAL_MAX_M = 0.015  # [m] per object: median |observed − rendered depth| on its pixels
 UNEXPLAINED_MAX = 0.25  # share of the observed foreground no perceived object covers
-MIN_PIXELS = 30  # [px] objects rendered smaller than this (hidden) are not judged
+MIN_PIXELS = 100  # [px] objects showing fewer inner pixels than this (hidden) are not judged
+EDGE_PX = 2  # [px] an object is judged this far in from its rendered outline
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -118,7 +119,9 @@ def scene_fit(
             raise ValueError(f"the frozen render drew {mask.shape} for a {h}×{w} observation")
     fits = []
     for k, o in enumerate(known):
-        mine = (mask == k) & valid
+        # away from its outline: a hidden object's sliver along its occluder's edge, or a pose
+        # a few millimetres off, would otherwise be judged on pixels of its neighbours
+        mine = _eroded(mask == k, EDGE_PX) & valid
         n = int(mine.sum())
         if n < MIN_PIXELS:
             fits.append(ObjectFit(id=o["id"], mesh=o["mesh"], pixels=n, support=None,
@@ -151,6 +154,20 @@ def scene_fit(
         problems.insert(0, f"nothing of {domain.name} was perceived, but something stands there")
     return SceneFit(objects=fits, foreground_px=fg, unexplained=unexplained, problems=problems,
                     mask=mask, foreground=foreground)  # fmt: skip
+
+
+def _eroded(mask: np.ndarray, px: int) -> np.ndarray:
+    """`mask` without the pixels within `px` (4-connected steps) of its outline."""
+    out = mask.copy()
+    for _ in range(px):
+        inner = out.copy()
+        inner[1:] &= out[:-1]
+        inner[:-1] &= out[1:]
+        inner[:, 1:] &= out[:, :-1]
+        inner[:, :-1] &= out[:, 1:]
+        inner[0], inner[-1], inner[:, 0], inner[:, -1] = False, False, False, False
+        out = inner
+    return out
 
 
 def table_depth(camera: Mapping[str, Any], shape: tuple[int, int]) -> np.ndarray:
