@@ -6,6 +6,8 @@ runs/<domain>/<run>/responses/<fn>-<k>.md    each model response, written before
 runs/<domain>/<run>/drafts/<fn>-<k>.py       the draft extracted from it
 runs/<domain>/<run>/reports/<fn>-<k>.json    its check report (+ .md, + images folder)
 runs/<domain>/<run>/frozen/<fn>.py           the passing draft
+runs/<domain>/<run>/requests/<fn>-<k>.md     the prompt of each call, as the model read it
+runs/<domain>/<run>/requests/images/<sha>.png  its images, stored once by content hash
 ```
 A run killed at any point resumes from these files: a saved response is never requested
 again, and a frozen function is never authored again.
@@ -27,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agent.clients.base import ModelResponse, Usage
+from agent.clients.base import ModelRequest, ModelResponse, Usage
 from agent.transcript import atomic_write
 
 
@@ -103,6 +105,28 @@ class Journal:
         if usage is not None:
             fields["usage"] = usage.to_dict()
         self.event("call_failed", **fields)
+
+    def save_request(self, request: ModelRequest) -> Path:
+        """Keep the prompt of a call — system and content text, images by content hash — as
+        Markdown, before the call is made (a reviewer reads what the model read)."""
+        from agent.clients.base import ImageBlock, TextBlock
+
+        images = self.dir / "requests" / "images"
+        parts = [f"<!-- request {request.hash} -->", "# system", ""]
+        parts += [b.text for b in request.system]
+        parts += ["", "# user", ""]
+        for block in request.content:
+            if isinstance(block, TextBlock):
+                parts.append(block.text)
+            elif isinstance(block, ImageBlock):
+                path = images / f"{block.sha256}.png"
+                if not path.is_file():
+                    images.mkdir(parents=True, exist_ok=True)
+                    path.write_bytes(block.png)
+                parts.append(f"![{block.caption}](images/{block.sha256}.png)")
+        out = self._file("requests", request.function, request.attempt, "md")
+        atomic_write(out, "\n".join(parts) + "\n")
+        return out
 
     def save_draft(self, function: str, attempt: int, source: str) -> Path:
         path = self._file("drafts", function, attempt, "py")

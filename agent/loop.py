@@ -144,6 +144,8 @@ class AuthoringRun:
                     "domain": self.ctx.domain,
                     "max_attempts": self.max_attempts,
                     "cases_seed": self.cases_seed,
+                    "author": _author_of(self.client),
+                    "commit": _commit(),
                 },
             )
         record = getattr(self.client, "record_cases_seed", None)
@@ -279,6 +281,7 @@ class AuthoringRun:
             text = self.journal.saved_response(function, attempt)
             if text is None:
                 self._say(function, attempt, "asking the model")
+                self.journal.save_request(request)
                 self.journal.event(
                     "call", function=function, attempt=attempt, request_hash=request.hash
                 )
@@ -383,6 +386,29 @@ class AuthoringRun:
             str(self.journal.dir),
             f"best attempt: {best.attempt} (first failure: {best.report.get('first_failure')})",
         )
+
+
+def _author_of(client: object) -> dict | None:
+    """Who answers this run's calls (provider and model, an agent, or people), as journaled."""
+    author = getattr(client, "author", None)
+    return author.to_dict() if author is not None else None
+
+
+def _commit() -> str | None:
+    """The repository's commit the run ran on (None outside a git checkout)."""
+    import subprocess
+
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short=12", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            cwd=Path(__file__).resolve().parent,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
 
 
 def _gate_images(outcome: GateOutcome, run_dir: Path, limit: int = 4) -> tuple[ImageBlock, ...]:

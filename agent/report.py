@@ -35,7 +35,11 @@ h1{font-size:22px}h2{font-size:18px;margin-top:2em;border-bottom:1px solid #ccc}
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ddd;padding:3px 8px;text-align:left}
 .passed{color:#1a7f37}.failed,.error{color:#cf222e}.skipped{color:#888}
 details{margin:.5em 0}pre{background:#f6f8fa;padding:8px;overflow:auto;font-size:12px}
-table.diff{font:12px monospace}.diff_add{background:#e6ffec}.diff_sub{background:#ffebe9}.diff_chg{background:#fff5b1}
+table.diff{font:12px monospace;table-layout:fixed;width:100%}
+table.diff td{word-break:break-all;white-space:pre-wrap;vertical-align:top}
+table.diff col.diff_next,table.diff td.diff_next{width:1.5em}table.diff .diff_header{width:3em}
+.diff_add{background:#e6ffec}.diff_sub{background:#ffebe9}.diff_chg{background:#fff5b1}
+table.head th{width:9em;background:#f6f8fa}
 img{max-width:100%;border:1px solid #ddd;margin:4px 0}
 """
 
@@ -101,7 +105,78 @@ def _img(data: bytes, name: str) -> str:
     return f'<img src="data:image/png;base64,{encoded}" alt="{_text(name)}">'
 
 
-def write_report(journal: Journal, title: str) -> Path:
+def _when(t: float | None) -> str:
+    import time
+
+    return "–" if t is None else time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(t))
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
+
+
+def _attempt_usage(events: list[dict], function: str, attempt: int) -> tuple[str, str]:
+    """(time from the call to its check, tokens and cost) of one attempt, for its heading."""
+
+    def at(kind: str) -> float | None:
+        return next((e["t"] for e in events if e["event"] == kind
+                     and (e.get("function"), e.get("attempt")) == (function, attempt)), None)  # fmt: skip
+
+    start, end = at("call"), at("checked")
+    took = _minutes(end - start) if start is not None and end is not None else "–"
+    response = next((e for e in events if e["event"] == "response"
+                     and (e.get("function"), e.get("attempt")) == (function, attempt)), None)  # fmt: skip
+    if response is None:
+        return took, "no call (a saved answer)"
+    u = response.get("usage", {})
+    return took, (
+        f"{u.get('input_tokens', 0)} in, {u.get('output_tokens', 0)} out, "
+        f"{u.get('cache_read_tokens', 0)} cache-read tokens; ${u.get('usd', 0.0):.2f}"
+    )
+
+
+def _header(journal: Journal, events: list[dict], usage: dict, set_hash: str | None) -> str:
+    """Who, what, when and how much, first: what a reviewer asks before reading on."""
+    started = next((e for e in events if e["event"] == "started"), {})
+    config = started.get("config", {})
+    author = config.get("author") or {}
+    who = (
+        f"{author.get('provider', '?')} · {author.get('model', '?')}"
+        if author.get("kind") == "model"
+        else "people: " + ", ".join(author.get("names", []))
+        if author.get("kind") == "people"
+        else "unknown (the journal predates this field)"
+    )
+    if author.get("note"):
+        who += f" ({author['note']})"
+    first, last = (events[0]["t"], events[-1]["t"]) if events else (None, None)
+    ended = next((e["event"] for e in reversed(events) if e["event"] in ("finished", "exhausted",
+                  "call_failed", "refused")), "did not finish")  # fmt: skip
+    rows = [
+        ("domain", config.get("domain", "–")),
+        ("author", who),
+        ("commit", config.get("commit") or "–"),
+        ("set hash", set_hash or "– (nothing frozen from this run)"),
+        ("date", _when(first)),
+        ("total time", _minutes(last - first) if first is not None else "–"),
+        ("ended", ended),
+        (
+            "tokens",
+            f"{usage['input']} input, {usage['output']} output, {usage['cache_write']} "
+            f"cache-write, {usage['cache_read']} cache-read",
+        ),
+        ("cost", f"${usage['usd']:.2f}"),
+        ("case seed", str(config.get("cases_seed", "–"))),
+    ]
+    return (
+        "<table class=head>"
+        + "".join(f"<tr><th>{k}</th><td>{_text(v)}</td></tr>" for k, v in rows)
+        + "</table>"
+    )
+
+
+def write_report(journal: Journal, title: str, *, set_hash: str | None = None) -> Path:
+    """Write `report.html` in the run's folder. `set_hash`: the frozen set this run produced."""
     events = journal.events()
     usage = {"input": 0, "output": 0, "cache_write": 0, "cache_read": 0, "usd": 0.0}
     for e in events:
@@ -117,6 +192,7 @@ def write_report(journal: Journal, title: str) -> Path:
         f"<!doctype html><meta charset=utf-8><title>{html.escape(title)}</title><style>{_CSS}</style>"
     ]
     out.append(f"<h1>{html.escape(title)}</h1>")
+    out.append(_header(journal, events, usage, set_hash))
     out.append(
         "<table><tr><th>function</th><th>attempts</th><th>result</th></tr>"
         + "".join(
@@ -125,10 +201,6 @@ def write_report(journal: Journal, title: str) -> Path:
             for f in authoring_order()
         )
         + "</table>"
-    )
-    out.append(
-        f"<p>Usage: {usage['input']} input, {usage['output']} output, {usage['cache_write']} cache-write, "
-        f"{usage['cache_read']} cache-read tokens; ${usage['usd']:.2f}.</p>"
     )
     for function in authoring_order():
         n = _attempts(journal, function)
@@ -141,16 +213,33 @@ def write_report(journal: Journal, title: str) -> Path:
             draft_path = journal.dir / "drafts" / f"{function}-{k}.py"
             draft = draft_path.read_text() if draft_path.is_file() else None
             status = "passed" if report and report["passed"] else "failed"
-            out.append(f"<h3>attempt {k}: <span class={status}>{status}</span></h3>")
+            took, spent = _attempt_usage(events, function, k)
+            prompt = journal.dir / "requests" / f"{function}-{k}.md"
+            link = (
+                f' · <a href="requests/{function}-{k}.md">the prompt</a>'
+                if prompt.is_file()
+                else ""
+            )
+            out.append(
+                f"<h3>attempt {k}: <span class={status}>{status}</span></h3>"
+                f"<p class=meta>{_text(took)} · {_text(spent)}{link}</p>"
+            )
             if report:
                 out.append(
                     "<table><tr><th>check</th><th>category</th><th>status</th><th>message</th></tr>"
                 )
                 for c in report["checks"]:
                     status = _text(c.get("status", ""))
+                    message = str(c.get("message", ""))
+                    shown = (  # the whole message: a long one folded, never cut
+                        f"<details><summary>{_text(message, 300)}</summary>"
+                        f"<pre>{_text(message)}</pre></details>"
+                        if len(message) > 300
+                        else _text(message)
+                    )
                     out.append(
                         f"<tr><td>{_text(c.get('name', ''))}</td><td>{_text(c.get('category', ''))}</td>"
-                        f'<td class="{status}">{status}</td><td>{_text(c.get("message", ""), 400)}</td></tr>'
+                        f'<td class="{status}">{status}</td><td>{shown}</td></tr>'
                     )
                 out.append("</table>")
                 for c in report["checks"]:

@@ -269,10 +269,12 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
                     results.extend([False] * (args.runs - i - 1))
                     break
                 continue
-            report = write_report(journal, f"RIVET authoring run — {domain.name}")
             results.append(True)
-            if args.runs > 1:
-                continue  # reliability studies: keep each run's programs under runs/, freeze none
+            if (
+                args.runs > 1
+            ):  # reliability studies: keep each run's programs under runs/, freeze none
+                write_report(journal, f"RIVET authoring run — {domain.name}")
+                continue
             per_fn = summary(journal)
             manifest = build_manifest(
                 domain.name,
@@ -287,6 +289,9 @@ def _author_runs(args, domain, ctx, checker, runs_root: Path, results: list[bool
             # the set hash a manifest is stamped with, read as eval.json's is
             before = stamped_set_hash(domain_dir(domain.name, root) / "manifest.json")
             state = "unchanged"
+            report = write_report(
+                journal, f"RIVET authoring run — {domain.name}", set_hash=manifest["set_hash"]
+            )
             if freeze(domain.name, frozen, manifest, root):
                 state = "written"
                 if before == manifest["set_hash"]:
