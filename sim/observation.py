@@ -149,6 +149,7 @@ class Renderer:
         mask: bool = False,
         mask_ids: Sequence[str] | None = None,
         lighting: Lighting | None = None,
+        quick: bool = False,
     ) -> dict[str, np.ndarray]:
         """Render `data` from `camera`: {"rgb", "depth" (clean) [, "mask"]}.
 
@@ -156,13 +157,16 @@ class Renderer:
             mask_ids: object ids giving the mask's indices (mask = index, -1 background).
             lighting: lights for this render only (`sim.scene.Lighting`); the model's own
                 lights are restored afterwards. None: the model's lights as they are.
+            quick: no shadows and no reflections (a video frame: about 5× faster on a CPU
+                rasteriser); never for an observation.
         """
+        kw = {"depth": depth, "mask": mask, "mask_ids": mask_ids, "quick": quick}
         if lighting is None:
-            return self._render(data, camera, depth=depth, mask=mask, mask_ids=mask_ids)
+            return self._render(data, camera, **kw)  # type: ignore[arg-type]
         saved = lighting_of(self.model)
         set_lighting(self.model, data, lighting)
         try:
-            return self._render(data, camera, depth=depth, mask=mask, mask_ids=mask_ids)
+            return self._render(data, camera, **kw)  # type: ignore[arg-type]
         finally:
             set_lighting(self.model, data, saved)
 
@@ -174,6 +178,7 @@ class Renderer:
         depth: bool,
         mask: bool,
         mask_ids: Sequence[str] | None,
+        quick: bool = False,
     ) -> dict[str, np.ndarray]:
         cam = check_camera(camera)
         self.model.cam_pos[self._cam] = cam["T_world_camera"][:3, 3]
@@ -182,6 +187,8 @@ class Renderer:
         mujoco.mj_camlight(self.model, data)
         gl = self._gl
         gl.update_scene(data, camera=self._cam, scene_option=self._option)
+        gl.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = not quick
+        gl.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = not quick
         out = {"rgb": gl.render().copy()}
         if depth:
             gl.enable_depth_rendering()

@@ -42,7 +42,7 @@ from sim.executor import Executor, ExecutorConfig
 from sim.faults import Fault, Injector, biased
 from sim.faults import draw as draw_fault
 from sim.loop import ClosedLoop, RecoveryBudget
-from sim.observation import observe, renderer_for
+from sim.observation import Renderer, observe
 from sim.scene import body_name, build_spec
 from sim.score import final_success, state_accuracy
 from sim.sensing import EXACT, WRIST_CAMERA, Sensors
@@ -376,11 +376,14 @@ def run_trial(
     object_errors: list[dict] = []
     fault: Fault | None = None
     loop_record: dict | None = None
+    recorder: _Recorder | None = None
     if plan is not None and plan["status"] == "ok":
         t = time.perf_counter()
         model, data = _world(domain, instance)
         view = domain.camera(camera) if isinstance(camera, str) else camera
-        recorder = _Recorder(model, view) if record_dir is not None else None
+        recorder = (
+            _Recorder(model, view, record_dir / "trial.mp4") if record_dir is not None else None
+        )
         meshes = {
             o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
             for o in instance.start["objects"]
@@ -393,6 +396,8 @@ def run_trial(
             else belief_of(believed_start)
         )
         exec_config = protocol.executor_config(config)
+        if recorder is not None:
+            exec_config = replace(exec_config, record_fps=_Recorder.FPS)
         sensors = Sensors.of(
             model,
             data,
@@ -406,7 +411,15 @@ def run_trial(
             model, data, meshes, belief=belief, sensors=sensors, record=recorder, config=exec_config
         )
         injector = Injector(fault, model, data, meshes)
-        executor.on_phase = injector.on_phase
+
+        def on_phase(ex: Executor, phase: str, oid: str) -> None:
+            injector.on_phase(ex, phase, oid)
+            if recorder is not None and phase == "done":  # the recording's poses (scoring side)
+                recorder.poses(
+                    f"{oid} placed", data.time, _final_scene(domain, instance, model, data)
+                )
+
+        executor.on_phase = on_phase
         if loop == "closed":
             assert isinstance(believed_start, Mapping) and isinstance(out.goal_state, Mapping)
             closed = _ClosedTrial(domain, instance, camera, protocol, executor, injector, deadline)
@@ -480,12 +493,13 @@ def run_trial(
             failure = ("execution", why)
         timings["execute"] = time.perf_counter() - t
         if recorder is not None and record_dir is not None:
-            recorder.write(record_dir / "trial.mp4")
+            recorder.poses("end", data.time, final)
+            recorder.close()
             _save_png(record_dir / "final.png", recorder.last_rgb())
     elif failure is None:
         failure = ("planning", "no plan to execute")
     timings["total"] = time.perf_counter() - t0
-    return TrialResult(
+    trial = TrialResult(
         name=instance.name,
         state_ok=state_ok,
         plan_ok=plan_ok,
@@ -502,6 +516,36 @@ def run_trial(
         fault=None if fault is None else fault.to_dict(),
         fit=out.fit,
     )
+    if record_dir is not None:
+        _write_record(record_dir, domain, instance, camera, protocol, loop, out, plan,
+                      recorder.log if recorder is not None else [], trial)  # fmt: skip
+    return trial
+
+
+def _write_record(record_dir: Path, domain, instance, camera, protocol, loop, out, plan,
+                  poses: list[dict], result: TrialResult) -> None:  # fmt: skip
+    """`trial.json` beside the video: enough to replay and plot the trial without running it —
+    the true start and goal, what was perceived, the plan, every step's outcome, and the
+    objects' true poses after each placement and at the end."""
+    import json
+    from dataclasses import asdict
+
+    doc = {
+        "name": instance.name,
+        "domain": domain.name,
+        "observation_seeds": {side: _seed(instance.name, side) for side in ("start", "goal")},
+        "camera": domain.camera(camera) if isinstance(camera, str) else camera,
+        "view": camera if isinstance(camera, str) else None,
+        "protocol": asdict(protocol),
+        "loop": loop,
+        "truth": {"start": instance.start, "goal": instance.goal, "order": instance.order},
+        "perceived": {"start": out.start_state, "goal": out.goal_state},
+        "plan": plan,
+        "poses": poses,  # [{"label", "sim_time", "objects": {id: 4×4}}], the last: "end"
+        "result": result.to_dict(),
+    }
+    record_dir.mkdir(parents=True, exist_ok=True)
+    (record_dir / "trial.json").write_text(json.dumps(to_jsonable(doc)) + "\n")
 
 
 class _ClosedTrial:
@@ -629,34 +673,52 @@ def _released(model, data, object_ids) -> bool:
 
 
 class _Recorder:
-    """Renders the trial from the observation camera at half resolution for an MP4."""
+    """Streams the trial, seen from the observation camera at half resolution, into an MP4
+    as it is simulated (bounded memory: one frame at a time), at `FPS` frames per simulated
+    second, rendered without shadows and reflections (a review video, not an observation).
+    Keeps the objects' true poses after each placement (`poses`) for `trial.json`."""
 
-    def __init__(self, model, camera: Mapping) -> None:
+    FPS = 6.0
+
+    def __init__(self, model, camera: Mapping, path: Path) -> None:
+        import imageio.v2 as imageio
+
         self.camera = {
             **camera,
             "width": camera["width"] // 2,
             "height": camera["height"] // 2,
             "K": np.asarray(camera["K"], float) * np.array([[0.5], [0.5], [1.0]]),
         }
-        self.renderer = renderer_for(model, self.camera["width"], self.camera["height"])
-        self.frames: list[np.ndarray] = []
+        # its own GL context, sized to the frame and without multisampling: reading the pixels
+        # back from a large multisampled buffer costs a CPU rasteriser more than drawing them
+        g, q = model.vis.global_, model.vis.quality
+        saved = (g.offwidth, g.offheight, q.offsamples)
+        g.offwidth, g.offheight, q.offsamples = self.camera["width"], self.camera["height"], 0
+        try:
+            self.renderer = Renderer(model, self.camera["width"], self.camera["height"])
+        finally:
+            g.offwidth, g.offheight, q.offsamples = saved
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.writer: Any = imageio.get_writer(
+            path, fps=self.FPS, codec="libx264", quality=6, macro_block_size=8
+        )
+        self.last: np.ndarray | None = None
+        self.log: list[dict] = []
 
     def __call__(self, model, data) -> None:
-        self.frames.append(self.renderer.render(data, self.camera, depth=False)["rgb"])
+        self.last = self.renderer.render(data, self.camera, depth=False, quick=True)["rgb"]
+        self.writer.append_data(self.last)
+
+    def poses(self, label: str, sim_time: float, scene: Mapping) -> None:
+        self.log.append({"label": label, "sim_time": round(float(sim_time), 3),
+                         "objects": {o["id"]: o["pose"] for o in scene["objects"]}})  # fmt: skip
 
     def last_rgb(self) -> np.ndarray:
-        return self.frames[-1] if self.frames else np.zeros((8, 8, 3), np.uint8)
+        return self.last if self.last is not None else np.zeros((8, 8, 3), np.uint8)
 
-    def write(self, path: Path) -> None:
-        import imageio.v2 as imageio
-
-        path.parent.mkdir(parents=True, exist_ok=True)
-        writer: Any = imageio.get_writer(
-            path, fps=30, codec="libx264", quality=6, macro_block_size=8
-        )
-        with writer as w:
-            for f in self.frames:
-                w.append_data(f)
+    def close(self) -> None:
+        self.writer.close()
+        self.renderer.close()
 
 
 def _save_png(path: Path, rgb: np.ndarray) -> None:

@@ -132,6 +132,26 @@ def test_record_writes_a_video_and_the_three_images(cubes, tmp_path):
     video = (tmp_path / "trial.mp4").read_bytes()
     assert video[4:8] == b"ftyp" and len(video) > 10_000  # an MP4 container with frames in it
 
+    # trial.json replays the trial without running it: the final state scores as the trial did
+    import json
+
+    from sim.score import final_success
+
+    doc = json.loads((tmp_path / "trial.json").read_text())
+    assert [p["label"] for p in doc["poses"]] == [f"{oid} placed", "end"]
+    assert doc["plan"]["steps"][0]["object"] == oid and doc["result"] == r.to_dict()
+    assert doc["truth"]["goal"]["objects"] and doc["observation_seeds"]["start"] > 0
+    end = doc["poses"][-1]
+    scene = {
+        "domain": "cubes",
+        "objects": [
+            {"id": o["id"], "mesh": o["mesh"], "pose": end["objects"][o["id"]]}
+            for o in instance.start["objects"]
+        ],
+    }
+    replayed = final_success(domain, scene, instance.goal)
+    assert [e.within for e in replayed.objects] == [e["within"] for e in r.object_errors]
+
 
 class PerceivedWrong:
     """A policy that perceives the truth except for one object, shifted by `shift` metres, and
