@@ -2,7 +2,9 @@
 trials of each domain's dev benchmark that has frozen artifacts, in a Docker sandbox session as
 `rivet solve` runs them. Observations are rendered first and not timed. Reported per stage: CPU
 time of the calls (measured outside the programs, what the online budget limits), wall time of
-the calls, and the round trip with the sandbox's transfers."""
+the calls, and the round trip with the sandbox's transfers; and the solve's overhead beyond the
+programs' own CPU — round trip minus the five calls' CPU, and their ratio — the median over the
+trials (target: at most 100 ms)."""
 
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ def main() -> int:
                 continue
             cpu: dict[str, list[float]] = {}
             round_trip = []
+            overhead, ratio = [], []
             with system.runner(executor) as run:
                 for inst in d.benchmark()[:N]:
                     start = observe(d, inst.start, "front", seed=1)
@@ -36,6 +39,8 @@ def main() -> int:
                     for stage, seconds in run.cpu.items():
                         cpu.setdefault(stage, []).append(seconds)
                     round_trip.append(run.timings["round_trip"])
+                    overhead.append(run.timings["round_trip"] - run.cpu["total"])
+                    ratio.append(run.timings["round_trip"] / run.cpu["total"])
             stages = ", ".join(
                 f"{s} {1000 * statistics.median(cpu[s]):.0f}"
                 for s in ("perceive", "relate", "plan")
@@ -43,7 +48,9 @@ def main() -> int:
             print(
                 f"{name}: over {len(round_trip)} trials, median CPU ms: {stages}; "
                 f"round trip median {1000 * statistics.median(round_trip):.0f} ms, "
-                f"max {1000 * max(round_trip):.0f} ms"
+                f"max {1000 * max(round_trip):.0f} ms; overhead beyond the programs' CPU: "
+                f"median {1000 * statistics.median(overhead):.0f} ms (wall / CPU "
+                f"{statistics.median(ratio):.2f})"
             )
     return 0
 
