@@ -9,7 +9,10 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-EXAMPLES = ["docs/executor.md", "docs/api.md"]  # docs/refine.md's runs in tests/toolbox/test_refine.py
+EXAMPLES = [
+    "docs/executor.md",
+    "docs/api.md",
+]  # docs/refine.md's runs in tests/toolbox/test_refine.py
 
 
 def _blocks(path: Path) -> list[str]:

@@ -6,7 +6,6 @@ hostile draft of `tests/checks/drafts/`."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -75,9 +74,7 @@ def test_an_answer_over_its_counts_is_a_program_failure(
 ):
     system = _system(tmp_path, function, draft)
     with system.runner(executor) as run, pytest.raises(ProgramFailed) as info:
-        t0 = time.perf_counter()
         call(run)
-    assert time.perf_counter() - t0 < 30.0
     assert info.value.function == function
     assert str(info.value).startswith(
         f"the frozen `{function}` returned a value that cannot be used ({message}"

@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -32,6 +30,17 @@ def _graph(n: int, edges: list[dict]) -> dict:
         "nodes": [{"id": f"o{i}"} for i in range(n)],
         "edges": edges,
     }
+
+
+class Unread(list):
+    """A list whose length may be taken but whose items must not be read: a limit that
+    refuses on the count alone never touches them (an order, not a wall-clock window)."""
+
+    def __iter__(self):
+        raise AssertionError("an item was read")
+
+    def __getitem__(self, index):
+        raise AssertionError("an item was read")
 
 
 def _plan(n: int) -> dict:
@@ -72,10 +81,8 @@ def test_edges_are_bounded_by_the_objects_and_their_types():
     assert count_problem("relate", _graph(3, many), objects=3) == (
         "17 edge types in one graph, over the limit of 16"
     )
-    flood = [{"source": "o0", "target": "o1", "type": "on"}] * 200_000
-    t0 = time.perf_counter()
-    problem = count_problem("relate", _graph(3, flood), objects=3)
-    assert time.perf_counter() - t0 < 0.1  # len() first: nothing is read of 200,000 edges
+    flood = Unread([{"source": "o0", "target": "o1", "type": "on"}] * 200_000)
+    problem = count_problem("relate", _graph(3, flood), objects=3)  # len() first: none read
     assert problem == (
         f"200000 edges, over the {max_edges(3, MAX_RELATION_TYPES)} that 16 edge types could "
         "give 3 objects (one per type and ordered pair)"
@@ -114,10 +121,10 @@ def test_clip_says_how_much_it_cut():
 
 
 def test_a_plan_over_the_cap_fails_validation_at_once_with_a_short_message():
-    t0 = time.perf_counter()
+    plan = _plan(40_000)
+    plan["steps"] = Unread(plan["steps"])  # refused on its length: no step is read
     with pytest.raises(ContractError) as info:
-        validate("plan", _plan(40_000))
-    assert time.perf_counter() - t0 < 0.5
+        validate("plan", plan)
     assert str(info.value) == "plan: steps: 40000 plan steps, over the plan contract's cap of 1000"
 
 

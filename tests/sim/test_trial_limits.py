@@ -5,7 +5,6 @@ failed, saying so. Real engine: MuJoCo, the executor, the local sandbox for the 
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -53,9 +52,7 @@ def _still(instance, n: int) -> dict:
 def test_a_plan_over_the_cap_is_refused_before_execution(cubes):
     domain, instance = cubes
     policy = Handing(PolicyOutput(plan=_still(instance, 40_000), start_state=None, goal_state=None))
-    t0 = time.perf_counter()
     r = run_trial(domain, instance, policy)
-    assert time.perf_counter() - t0 < 30.0
     assert not (r.plan_ok or r.final_ok)
     assert r.failure == {
         "stage": "planning",
@@ -76,9 +73,7 @@ def test_perceived_states_over_the_counts_are_refused_before_scoring(cubes):
         ),
         oracle=False,
     )
-    t0 = time.perf_counter()
     r = run_trial(domain, instance, policy)
-    assert time.perf_counter() - t0 < 30.0
     assert r.failure == {
         "stage": "perception",
         "reason": "start: the perceived records are refused: 4000 records, but the domain's "
@@ -95,9 +90,7 @@ def test_a_program_plan_over_the_cap_fails_the_trial_at_planning(cubes, tmp_path
     (tmp_path / "plan.py").write_text((DRAFTS / "plan_long.py").read_text())
     policy = ProgramPolicy(from_folder("cubes", tmp_path), "programs", sandbox="local")
     try:
-        t0 = time.perf_counter()
         r = run_trial(domain, instance, policy)
-        assert time.perf_counter() - t0 < 60.0
     finally:
         policy.close()
     assert r.failure["stage"] == "planning"
@@ -135,10 +128,7 @@ def test_a_long_plan_within_the_cap_is_cut_off_by_the_deadline(cubes):
         PolicyOutput(plan={"status": "ok", "steps": steps}, start_state=None, goal_state=None)
     )
     deadline = 10.0
-    t0 = time.perf_counter()
     r = run_trial(domain, instance, policy, deadline_s=deadline)
-    took = time.perf_counter() - t0
-    assert took < deadline + 20.0, took  # one phase of a transfer past it, and parking
     assert r.execution_failure["kind"] == "deadline"
     assert 0 < r.execution_failure["step"] < 1000  # some steps ran, most did not
     assert r.failure["reason"].startswith("the trial ran past its 10 s wall-clock deadline")
