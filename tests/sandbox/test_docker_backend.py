@@ -188,17 +188,22 @@ def test_bytes_written_after_an_answer_are_refused_at_the_next_call(docker_execu
         "    os.write(3, wire.pack_frame({'status': 'returned'}, [b'2', b'']))\n"
         "    return 3\n"
     )
+    import time
+
     with docker_executor.open_session(Program(modules={"prog": source})) as session:
         reports = [session.call("prog", "f", timeout_s=5)]
         while reports[-1].ok and len(reports) < 8:
+            # let the late frames arrive before the next call is sent (a loaded machine can
+            # take a while to run the draft process): refused once they are there
+            time.sleep(0.1 * 2 ** len(reports))
             reports.append(session.call("prog", "f", timeout_s=5))
     first, *later, last = reports
     assert first.ok and first.value == 1, first
     # Every call writes three frames and the host takes one per call, so extra frames pile up
     # and are refused once they have arrived before a call is sent. A draft process slower to
     # write them than the host to send the next call gets its extra frame taken as that call's
-    # answer instead (one the draft could have returned anyway); on a loaded machine that can
-    # happen a few calls running, never for ever.
+    # answer instead (one the draft could have returned anyway); the waits between calls
+    # (0.2 s, doubling) leave the frames time to arrive.
     assert last.verdict in ("bad_output", "closed"), reports
     assert all(r.ok and r.value in (1, 2, 3) for r in later), reports
     assert "out of turn" in last.detail, reports
