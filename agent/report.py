@@ -32,9 +32,11 @@ MAX_IMAGE_BYTES = 16 << 20  # [bytes] an overlay PNG is a few hundred KiB
 _CSS = """
 body{font:14px/1.45 system-ui,sans-serif;margin:2em auto;max-width:1100px;color:#222}
 h1{font-size:22px}h2{font-size:18px;margin-top:2em;border-bottom:1px solid #ccc}
-table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ddd;padding:3px 8px;text-align:left}
+table{border-collapse:collapse;margin:.5em 0;max-width:100%}
+td,th{border:1px solid #ddd;padding:3px 8px;text-align:left}td:last-child{overflow-wrap:anywhere}
 .passed{color:#1a7f37}.failed,.error{color:#cf222e}.skipped{color:#888}
-details{margin:.5em 0}pre{background:#f6f8fa;padding:8px;overflow:auto;font-size:12px}
+details{margin:.5em 0}pre{background:#f6f8fa;padding:8px;overflow:auto;font-size:12px;
+white-space:pre-wrap;overflow-wrap:anywhere}
 table.diff{font:12px monospace;table-layout:fixed;width:100%}
 table.diff td{word-break:break-all;white-space:pre-wrap;vertical-align:top}
 table.diff col.diff_next,table.diff td.diff_next{width:1.5em}table.diff .diff_header{width:3em}

@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
 # Install and start the system pieces RIVET's tests and authoring need, when they are missing:
 # the Docker engine (the sandbox), debootstrap (the offline sandbox base image), the Mesa
-# EGL/OSMesa libraries (headless rendering) and the shared libraries open3d's wheel needs. As
+# EGL/OSMesa libraries (headless rendering), the shared libraries open3d's wheel needs and
+# Chromium (the authoring report is rendered headless by its test). As
 # root on Debian/Ubuntu it installs them with apt-get and starts dockerd; otherwise it says
 # what is missing and how to fix it.
 # Idempotent and quiet when everything is in place.
 set -euo pipefail
 
 # (libgomp1, libusb-1.0-0: open3d's wheel links them; the toolbox tests import it on the host)
-PACKAGES=(docker.io debootstrap libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libosmesa6 libgomp1 libusb-1.0-0)
+# chromium: the headless browser the authoring report is rendered in by its test
+PACKAGES=(docker.io debootstrap libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libosmesa6 libgomp1 libusb-1.0-0 chromium)
 missing=()
 if command -v dpkg-query >/dev/null 2>&1; then
   for p in "${PACKAGES[@]}"; do

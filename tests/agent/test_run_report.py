@@ -9,6 +9,7 @@ import hashlib
 import re
 
 import numpy as np
+import pytest
 
 from agent.clients import AnthropicClient, _http
 from agent.journal import Journal
@@ -34,9 +35,11 @@ class PictureChecker(ToyChecker):
         return report
 
 
-def test_a_model_run_keeps_its_prompts_and_its_report_says_who_what_when_how_much(
-    tmp_path, monkeypatch
-):
+@pytest.fixture(scope="module")
+def authored(tmp_path_factory):
+    """A --model run of the toy domain against the fake Anthropic API: (journal, run folder)."""
+    tmp_path = tmp_path_factory.mktemp("report")
+    monkeypatch = pytest.MonkeyPatch()
     monkeypatch.setenv("ANTHROPIC_API_KEY", "sk-ant-test-not-a-key")
     answers = [good("render"), bad("perceive"), good("perceive"), good("relate"), good("plan")]
     journal = Journal(tmp_path / "run")
@@ -54,7 +57,12 @@ def test_a_model_run_keeps_its_prompts_and_its_report_says_who_what_when_how_muc
             journal=journal,
             progress=lambda _: None,
         ).run()
-    run = tmp_path / "run"
+    monkeypatch.undo()
+    return journal, tmp_path / "run"
+
+
+def test_a_model_run_keeps_its_prompts_and_its_report_says_who_what_when_how_much(authored):
+    journal, run = authored
 
     # every prompt, as sent: perceive's second one carries the failing check's image
     prompts = sorted(p.name for p in (run / "requests").glob("*.md"))
@@ -85,3 +93,37 @@ def test_a_model_run_keeps_its_prompts_and_its_report_says_who_what_when_how_muc
     assert '<a href="requests/perceive-2.md">the prompt</a>' in attempt[1]
     # a long message is whole (folded), never cut
     assert "x" * 700 + " the end" in page
+
+
+def test_the_report_renders_in_a_real_browser_and_fits_the_page(authored, tmp_path):
+    """Headless Chromium (the system package `make system` installs) lays the page out: the
+    header and every attempt are there, nothing is wider than the window (the side-by-side diff
+    included), and a screenshot is kept beside the test's files for a person to look at."""
+    import shutil
+    import subprocess
+
+    journal, run = authored
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    assert browser, "chromium is missing: `make system` (scripts/bootstrap-system.sh) installs it"
+    page = write_report(journal, "RIVET authoring run — toy", set_hash="0123abcd")
+    probe = run / "probe.html"
+    probe.write_text(
+        page.read_text()
+        + "<script>document.body.dataset.overflow = String(document.documentElement.scrollWidth"
+        " > window.innerWidth); document.body.dataset.attempts = String(document.querySelectorAll"
+        "('h3').length); document.body.dataset.head = String(document.querySelectorAll("
+        "'table.head tr').length);</script>"
+    )
+    common = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--window-size=1100,1400"]
+    dom = subprocess.run(
+        [*common, "--dump-dom", probe.as_uri()], capture_output=True, text=True, timeout=120
+    )
+    assert dom.returncode == 0, dom.stderr[-2000:]
+    body = re.search(r"<body([^>]*)>", dom.stdout)
+    assert body, dom.stdout[:2000]
+    assert 'data-overflow="false"' in body[1], body[1]
+    assert 'data-attempts="5"' in body[1] and 'data-head="10"' in body[1], body[1]
+    shot = tmp_path / "report.png"
+    subprocess.run([*common, f"--screenshot={shot}", page.as_uri()], capture_output=True,
+                   timeout=120, check=True)  # fmt: skip
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and shot.stat().st_size > 20_000
