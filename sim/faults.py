@@ -96,7 +96,10 @@ def draw(names: Sequence[str], trial: str, plan_length: int) -> Fault | None:
 
 def biased(fault: Fault | None, state: Mapping | None) -> Mapping | None:
     """The perceived start state with the bias fault applied (a copy), else `state` itself."""
-    if fault is None or fault.name != "bias" or not isinstance(state, Mapping):
+    if fault is None or fault.name != "bias":
+        return state
+    if not isinstance(state, Mapping):
+        fault.record = {"happened": False, "why": "no perceived start to bias (the oracle)"}
         return state
     records = [dict(r) for r in state.get("objects", []) if isinstance(r, Mapping)]
     if not records:

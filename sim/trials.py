@@ -13,6 +13,11 @@ ground truth is read only to render the observations and to score. The oracle po
 exception by definition: ground-truth states and the reference construction order, so it
 measures the executor alone.
 
+Open or closed loop (`run_trial(loop=…)`): open, the paper's protocol, runs the plan to its
+end; closed (`sim.loop`) parks the arm after each transfer, observes the scene again with the
+trial's camera and realism, and lets the policy's own programs replan when the scene is not
+what was believed. `faults` injects one seeded fault per trial (`sim.faults`).
+
 What the policy hands over is bounded before anything works on it: a plan over the plan
 contract's step cap (`contracts.limits`) is refused unexecuted, and every trial has a
 wall-clock deadline (`TRIAL_DEADLINE_S`): the executor starts no phase of a transfer after it,
