@@ -530,6 +530,13 @@ class _Child:
                 if ended is not None:
                     self.status, self.peak_kib = ended
             frame, over_cap = self._frame()
+            if frame is None and not over_cap and self.status is not None:
+                # it has ended, so all it wrote is in the pipes: read the rest before judging
+                # it (its answer may have come with its exit, in one wake-up or none)
+                for fd in [f for f, kind in self.fds.items() if kind == "result"]:
+                    while fd in self.fds and self._read(fd):
+                        pass
+                frame, over_cap = self._frame()
             if frame is not None or over_cap or self.status is not None:
                 break
             now = time.monotonic()
