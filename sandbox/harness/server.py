@@ -656,7 +656,7 @@ class _Child:
         processes, are not looked at: the figure can only understate the wait."""
         now = self.run_delays()
         grown = [delay - before.get(tid, 0) for tid, delay in now.items()]
-        return max(0, *grown) / 1e9
+        return max([0, *grown]) / 1e9
 
     def cpu_seconds(self) -> float:
         """CPU time used so far by the program: the container's whole account inside the

@@ -125,3 +125,16 @@ def test_a_small_memory_limit_still_runs_small_jobs(local_executor):
     assert run(local_executor, source, inputs={"n": 8 << 20}, memory_mb=32).output == 8 << 20
     report = run(local_executor, source, inputs={"n": 64 << 20}, memory_mb=32)
     assert report.verdict == "oom" and 'File "draft.py", line 2' in report.exception.traceback
+
+
+def test_a_call_that_ended_with_the_process_is_still_judged():
+    """A process that exited with its answer has no threads left to read a CPU wait from:
+    the wait is zero, not a harness error (it was one, now and then, on a busy machine)."""
+    from types import SimpleNamespace
+
+    from sandbox.harness.server import _Child
+
+    gone = SimpleNamespace(run_delays=dict)
+    assert _Child.queued_seconds(gone, {"7": 5}) == 0.0
+    running = SimpleNamespace(run_delays=lambda: {"7": 3_000_000_000, "8": 10})
+    assert _Child.queued_seconds(running, {"7": 1_000_000_000}) == 2.0
