@@ -23,7 +23,6 @@ saved answers were cut off.
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +30,7 @@ from typing import Any
 
 from agent.clients.base import ModelRequest, ModelResponse, Usage
 from agent.transcript import atomic_write
+from artifacts import jsonl
 
 
 @dataclass
@@ -56,11 +56,9 @@ class Journal:
     # --- writing ---------------------------------------------------------------------------
 
     def event(self, kind: str, **fields: Any) -> None:
-        line = json.dumps({"t": round(time.time(), 3), "event": kind, **fields}, sort_keys=True)
-        with open(self.path, "a") as f:
-            f.write(line + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+        jsonl.append(
+            self.path, {"t": round(time.time(), 3), "event": kind, **fields}, sort_keys=True
+        )
 
     def save_response(
         self,
@@ -174,15 +172,7 @@ class Journal:
         return path.read_text() if path.is_file() else None
 
     def events(self) -> list[dict[str, Any]]:
-        if not self.path.is_file():
-            return []
-        out = []
-        for line in self.path.read_text().splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                break  # a torn last line from a kill mid-write: everything before it holds
-        return out
+        return jsonl.read(self.path)
 
     def state(self) -> RunState:
         st = RunState()

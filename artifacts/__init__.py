@@ -1,6 +1,7 @@
 """Frozen programs per domain (`artifacts/<domain>/`) and the thin runtime that runs them in a
 sandbox session (`artifacts.runtime`), the observation folders it reads
-(`artifacts.observations`), and the policy the trials run (`artifacts.policy`).
+(`artifacts.observations`), the policy the trials run (`artifacts.policy`), and the
+append-only JSON-lines files of journals and trial logs (`artifacts.jsonl`).
 
 The runtime imports neither the model SDK nor the simulator.
 """

@@ -12,12 +12,12 @@ one authoring run (`RUN_DIR/frozen/`, as `rivet author` writes it). A reliabilit
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from artifacts import jsonl
 from artifacts.runtime import Runner, System, from_folder, load
 from contracts.errors import UsageError
 
@@ -177,16 +177,6 @@ def find_runs(domain: str, runs_dir: Path) -> list[AuthoringRunFolder]:
     return [_run_folder(domain, runs_dir, f) for f in folders]
 
 
-def _events(journal: Path) -> list[dict[str, Any]]:
-    out = []
-    for line in journal.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            break  # a torn last line (a run killed mid-write): what came before holds
-    return out
-
-
 def _run_folder(domain: str, runs_dir: Path, path: Path) -> AuthoringRunFolder:
     from contracts.functions import FUNCTIONS
 
@@ -198,7 +188,7 @@ def _run_folder(domain: str, runs_dir: Path, path: Path) -> AuthoringRunFolder:
     journal = path / "journal.jsonl"
     if not journal.is_file():
         return failed("no journal.jsonl: the run never started", started=False)
-    events = _events(journal)
+    events = jsonl.read(journal)
     started = next((e for e in events if e.get("event") == "started"), None)
     if started is not None:
         other = started.get("config", {}).get("domain")

@@ -12,7 +12,6 @@ log of another configuration is refused, never mixed in.
 from __future__ import annotations
 
 import json
-import os
 import statistics
 import sys
 from collections import Counter
@@ -24,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from artifacts import jsonl
 from artifacts.policy import PolicySpec
 from artifacts.policy import make_policy as policy_of
 from sim.trials import HONEST, TrialProtocol
@@ -137,7 +137,7 @@ class TrialLog:
         self.header = json.loads(json.dumps(to_jsonable(header)))
         self.kept: dict[str, dict] = {}
         if resume and path.is_file():
-            lines = self._lines()
+            lines = jsonl.read(path)
             if not lines or lines[0].get("evaluation") != self.header:
                 raise UsageError(
                     f"--resume: {path} is the log of another evaluation (another policy, "
@@ -147,27 +147,15 @@ class TrialLog:
             self.kept = {r["name"]: r for r in lines[1:] if "name" in r}
         else:
             path.parent.mkdir(parents=True, exist_ok=True)
-            with open(path, "w") as f:
-                f.write(json.dumps({"evaluation": self.header}) + "\n")
+            path.unlink(missing_ok=True)
+            jsonl.append(path, {"evaluation": self.header})
 
     def earlier(self) -> int:
         """Trials an earlier, unfinished log at this path holds (0: none)."""
         return len(self.kept)
 
-    def _lines(self) -> list[dict]:
-        out = []
-        for line in self.path.read_text().splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                break  # a torn last line from a kill mid-write: everything before it holds
-        return out
-
     def add(self, result: dict) -> None:
-        with open(self.path, "a") as f:
-            f.write(json.dumps(result) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+        jsonl.append(self.path, result)
 
 
 def run_eval(
