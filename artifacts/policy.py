@@ -29,11 +29,14 @@ class ProgramPolicy:
 
     oracle = False
 
-    def __init__(self, system: System, name: str, *, sandbox: str = "docker") -> None:
+    def __init__(
+        self, system: System, name: str, *, sandbox: str = "docker", fit: bool = False
+    ) -> None:
         import sandbox as sb
 
         self.system = system
         self.name = name
+        self.fit = fit  # judge each perceived state's fit (`artifacts.fit`), about 0.5 s a trial
         self.executor = sb.open_executor(sandbox, **({"quiet": True} if sandbox == "local" else {}))
         self._runner: Runner | None = None
 
@@ -54,12 +57,14 @@ class ProgramPolicy:
         start, goal = run.last_states or (None, None)
         timings = dict(run.timings)
         timings.update({f"cpu_{k}": v for k, v in run.cpu.items()})
-        t = time.perf_counter()
-        fit = {
-            side: _fit(domain, obs, state, run)
-            for side, obs, state in (("start", start_obs, start), ("goal", goal_obs, goal))
-        }
-        timings["fit"] = time.perf_counter() - t
+        fit = None
+        if self.fit:
+            t = time.perf_counter()
+            fit = {
+                side: _fit(domain, obs, state, run)
+                for side, obs, state in (("start", start_obs, start), ("goal", goal_obs, goal))
+            }
+            timings["fit"] = time.perf_counter() - t
         return PolicyOutput(plan=plan, start_state=start, goal_state=goal, timings=timings, fit=fit)
 
     def programs(self) -> Runner:
@@ -89,8 +94,11 @@ def _fit(domain: Any, observation: dict, state: dict | None, run: Runner) -> dic
         return {"ok": None, "problems": [f"the fit cannot be judged: {type(e).__name__}: {e}"]}
 
 
-def make_policy(domain: str, spec: PolicySpec, *, sandbox: str = "docker") -> Any:
-    """The policy a spec names: the oracle, the frozen artifacts, or a programs folder."""
+def make_policy(
+    domain: str, spec: PolicySpec, *, sandbox: str = "docker", fit: bool = False
+) -> Any:
+    """The policy a spec names: the oracle, the frozen artifacts, or a programs folder.
+    `fit`: a programs policy also judges each perceived state's fit (`artifacts.fit`)."""
     kind, folder = spec
     if kind == "oracle":
         from sim.trials import OraclePolicy
@@ -98,19 +106,19 @@ def make_policy(domain: str, spec: PolicySpec, *, sandbox: str = "docker") -> An
         return OraclePolicy()
     if kind == "artifacts":
         return ProgramPolicy(
-            load(domain, Path(folder) if folder else None), "artifacts", sandbox=sandbox
+            load(domain, Path(folder) if folder else None), "artifacts", sandbox=sandbox, fit=fit
         )
     if kind == "programs":
         if folder is None:
             raise UsageError("--policy programs needs a folder")
         return ProgramPolicy(
-            from_folder(domain, Path(folder)), f"programs {folder}", sandbox=sandbox
+            from_folder(domain, Path(folder)), f"programs {folder}", sandbox=sandbox, fit=fit
         )
     if kind == "run":
         if folder is None:
             raise UsageError("policy 'run' needs an authoring run's folder")
         programs = Path(folder) / "frozen"
-        return ProgramPolicy(from_folder(domain, programs), f"run {folder}", sandbox=sandbox)
+        return ProgramPolicy(from_folder(domain, programs), f"run {folder}", sandbox=sandbox, fit=fit)
     if kind == "runs":
         raise UsageError(
             "'runs DIR' is a study, not one policy: `rivet eval DOMAIN --policy runs DIR` "

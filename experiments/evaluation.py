@@ -62,10 +62,11 @@ class EvalConfig:
     record_root: str | None = None
     loop: str = "open"  # "closed": look again after each transfer and replan (sim.loop)
     faults: tuple[str, ...] = ()  # one fault per trial drawn from these (sim.faults)
+    fit: bool = False  # judge each perceived state's fit (artifacts.fit) into the trial JSON
 
 
 def make_policy(config: EvalConfig) -> Any:
-    return policy_of(config.domain, config.policy, sandbox=config.sandbox)
+    return policy_of(config.domain, config.policy, sandbox=config.sandbox, fit=config.fit)
 
 
 _WORKER: dict[str, Any] = {}

@@ -50,6 +50,7 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
         record_root=str(Path(args.record) / domain_name / view) if args.record else None,
         loop=args.loop,
         faults=parse_faults(args.faults),
+        fit=args.fit,
     )
     path = _log_path(args, domain_name, view)
     log = TrialLog(
@@ -314,6 +315,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="NAME[,NAME]|all",
         help="inject one fault per trial, drawn from these (slip, push, move, bias, skip: "
         "sim.faults.FAULTS, docs/executor.md)",
+    )
+    p.add_argument(
+        "--fit",
+        action="store_true",
+        help="also judge how well each perceived state explains its image, as `rivet solve` "
+        "does (artifacts.fit), into each trial's JSON (about 0.5 s a trial)",
     )
     p.add_argument(
         "--resume",

@@ -1,5 +1,6 @@
-"""`rivet eval --view all` on the frozen artifacts: one summary per camera, each naming the set
-hash of the programs it ran (so a result can be traced to the artifacts that produced it)."""
+"""`rivet eval` from the command line: `--view all` on the frozen artifacts gives one summary
+per camera, each naming the set hash of the programs it ran (so a result can be traced to the
+artifacts that produced it); the options' validation, signals and `--resume`."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ def test_every_view_summary_names_the_evaluated_set(tmp_path):
             "1",
             "--view",
             "all",
+            "--fit",
             "--quiet",
             "--json",
             str(out),
@@ -43,6 +45,8 @@ def test_every_view_summary_names_the_evaluated_set(tmp_path):
     for view, summary in summaries.items():
         assert summary["view"] == view and summary["trials"] == 1
         assert summary["set_hash"] == manifest["set_hash"]
+        (trial,) = summary["per_trial"]  # --fit: how well each perceived state explains its image
+        assert sorted(trial["fit"]) == ["goal", "start"] and trial["fit"]["start"]["ok"], trial
 
 
 def _one_oracle_trial(tmp_path, *options: str) -> list[str]:
