@@ -57,10 +57,14 @@ class RecoveryBudget:
     Attributes:
         replans: plans made after the first one.
         seconds: wall-clock time from `begin` (or `adopt`) to the last step handed out [s].
+        same_failure: how many times in a row the same step (object and target) may fail
+            for the same reason on a scene that looks unchanged: trying it again would only
+            repeat what was seen (a part wedged where no grasp fits).
     """
 
     replans: int = 5
     seconds: float = 300.0
+    same_failure: int = 2
 
 
 @dataclass
@@ -102,6 +106,7 @@ class ClosedLoop:
         self.remaining: list[dict] = []
         self._current: dict | None = None
         self._t0 = time.perf_counter()
+        self._repeated: tuple[dict, str, int] | None = None  # (step, failure, times in a row)
 
     # -- starting -------------------------------------------------------------------------
 
@@ -145,7 +150,16 @@ class ClosedLoop:
                                if not ok else []) + off[:4])),
         ))  # fmt: skip
         if ok and not off:
+            self._repeated = None
             return self._next()
+        if not ok and not off:
+            times = self._same_failure(step, failure or "")
+            if times >= self.budget.same_failure:
+                return self._stop(f"step {self.reported} ({step['object']}) failed {times} times "
+                                  f"in a row the same way on a scene that did not change: "
+                                  f"{clip(failure or 'no reason', 160)}")  # fmt: skip
+        else:
+            self._repeated = None
         if self.replans >= self.budget.replans:
             return self._stop(f"the recovery budget of {self.budget.replans} replans is spent "
                                  f"({'; '.join(off[:2]) or 'a step failed'})")  # fmt: skip
@@ -157,6 +171,25 @@ class ClosedLoop:
         return self._follow(self.programs.plan(state, self.goal), f"replan {self.replans}")
 
     # -- inside -------------------------------------------------------------------------------
+
+    def _same_failure(self, step: dict, failure: str) -> int:
+        """How many times in a row `step` has now failed with `failure`, the scene unchanged."""
+        tol = self.domain.tolerance
+        last = self._repeated
+        again = (
+            last is not None
+            and last[0]["object"] == step["object"]
+            and last[1] == failure
+            and se3.within_tolerance(
+                last[0]["target_pose"],
+                step["target_pose"],
+                trans_tol=tol.translation,
+                rot_tol=tol.rotation,
+            )
+        )
+        times = last[2] + 1 if again and last is not None else 1
+        self._repeated = (step, failure, times)
+        return times
 
     def _state(self, records: list[dict]) -> dict:
         return {"objects": records, "relations": self.programs.relate(records)}

@@ -133,6 +133,36 @@ def test_the_budget_ends_the_loop_with_a_clear_status(cubes):
     assert loop.to_dict()["events"][-1] == {"kind": "gave_up", "step": 3, "detail": loop.reason}
 
 
+def test_a_step_failing_the_same_way_on_an_unchanged_scene_ends_the_loop_early(cubes):
+    programs = Scripted()
+    loop = ClosedLoop(cubes, programs)  # 5 replans allowed, the same failure twice
+    a0, a1 = _at(0.5, 0.0), _at(0.4, 0.0)
+    loop.begin(_obs(a=a0), _obs(a=a1))
+    wedged = "no_grasp: no feasible top-down grasp: 60 fingers hit 'b'"
+    assert loop.report(ok=False, observation=_obs(a=a0), failure=wedged)["object"] == "a"
+    assert loop.report(ok=False, observation=_obs(a=a0), failure=wedged) is None
+    assert (loop.status, loop.replans) == ("gave_up", 1)
+    assert loop.reason == (
+        f"step 2 (a) failed 2 times in a row the same way on a scene that did not change: {wedged}"
+    )
+
+
+def test_another_failure_or_a_changed_scene_starts_the_count_again(cubes):
+    programs = Scripted()
+    loop = ClosedLoop(cubes, programs, budget=RecoveryBudget(replans=9, same_failure=2))
+    a0, a1 = _at(0.5, 0.0), _at(0.4, 0.0)
+    loop.begin(_obs(a=a0), _obs(a=a1))
+    loop.report(ok=False, observation=_obs(a=a0), failure="grasp_failed: nothing is held")
+    loop.report(ok=False, observation=_obs(a=a0), failure="no_grasp: fingers hit 'b'")
+    moved = _at(0.52, 0.0)  # the failed grasp nudged it: the scene changed
+    wedged = "no_grasp: fingers hit 'b'"
+    for _ in range(2):  # the nudged scene's failure counts from one again
+        loop.report(ok=False, observation=_obs(a=moved), failure=wedged)
+    assert loop.status == "running" and loop.replans == 4
+    assert loop.report(ok=False, observation=_obs(a=moved), failure=wedged) is None
+    assert loop.status == "gave_up" and "failed 2 times in a row" in loop.reason
+
+
 def test_an_infeasible_replan_gives_up_saying_so(cubes):
     programs = Scripted()
     loop = ClosedLoop(cubes, programs)
