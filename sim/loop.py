@@ -107,6 +107,9 @@ class ClosedLoop:
         self._current: dict | None = None
         self._t0 = time.perf_counter()
         self._repeated: tuple[dict, str, int] | None = None  # (step, failure, times in a row)
+        # an object's pose taken from a look over what was believed before: (before, seen)
+        self._looked: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._refuted: dict[str, list[np.ndarray]] = {}  # seen poses a grasp found empty
 
     # -- starting -------------------------------------------------------------------------
 
@@ -129,17 +132,30 @@ class ClosedLoop:
 
     # -- after each transfer ------------------------------------------------------------------
 
-    def report(self, *, ok: bool, observation: Mapping[str, Any], failure: str | None = None
-               ) -> dict | None:  # fmt: skip
+    def report(self, *, ok: bool, observation: Mapping[str, Any], failure: str | None = None,
+               missed: bool = False) -> dict | None:  # fmt: skip
         """The robot carried out the step last handed out (`ok`: its own sensors saw no
-        failure; `failure`: what they said) and looked again: the next step, or None when the
-        loop has ended (`status`)."""
+        failure; `failure`: what they said; `missed`: the hand closed on nothing where the
+        object was believed) and looked again: the next step, or None when the loop has ended
+        (`status`).
+
+        A look can be wrong too (a part half hidden, a camera `perceive` reads poorly): when
+        the hand closes on nothing where a look had moved an object's belief, that look is
+        refuted — the object is believed where it was before, and a later look that shows it
+        at the refuted pose again is not believed."""
         if self.status != "running" or self._current is None:
             raise RuntimeError("report() follows a step handed out by begin/adopt/report")
         step, self._current = self._current, None
         self.reported += 1
+        oid = str(step["object"])
         if ok:
-            self.belief[str(step["object"])] = np.asarray(step["target_pose"], float)
+            target = np.asarray(step["target_pose"], float)
+            self.belief[oid] = target
+            self._looked.pop(oid, None)  # placed: the hand knows where it is
+            self._refuted[oid] = [
+                T for T in self._refuted.get(oid, []) if not self._near(T, target)
+            ]
+        recalled = not ok and missed and self._recall(oid)  # before the new look is judged
         seen = self.programs.perceive(observation)
         self.observations += 1
         off = self._differences(seen)
@@ -147,12 +163,14 @@ class ClosedLoop:
             kind="observed", step=self.reported,
             detail=("as expected" if not off and ok else
                     "; ".join(([f"the step failed: {clip(failure or 'no reason', 160)}"]
-                               if not ok else []) + off[:4])),
+                               if not ok else []) + off[:4] +
+                              ([f"{oid} was not where a look had put it: believed where it "
+                                "was before"] if recalled else []))),
         ))  # fmt: skip
         if ok and not off:
             self._repeated = None
             return self._next()
-        if not ok and not off:
+        if not ok and not off and not recalled:
             times = self._same_failure(step, failure or "")
             if times >= self.budget.same_failure:
                 return self._stop(f"step {self.reported} ({step['object']}) failed {times} times "
@@ -172,20 +190,37 @@ class ClosedLoop:
 
     # -- inside -------------------------------------------------------------------------------
 
+    def _symmetries(self, mesh: str | None) -> list[np.ndarray]:
+        if mesh in self.domain.mesh_specs:
+            return list(self.domain.symmetries(mesh))
+        return [np.eye(4)]
+
+    def _near(self, a: np.ndarray, b: np.ndarray, mesh: str | None = None) -> bool:
+        """Whether two poses agree within the domain's scoring tolerance (modulo `mesh`'s
+        symmetries when given)."""
+        tol = self.domain.tolerance
+        return se3.within_tolerance(a, b, trans_tol=tol.translation, rot_tol=tol.rotation,
+                                    symmetries=self._symmetries(mesh))  # fmt: skip
+
+    def _recall(self, oid: str) -> bool:
+        """Undo the look that moved `oid`'s belief (a grasp there found nothing): True when
+        there was one."""
+        looked = self._looked.pop(oid, None)
+        if looked is None:
+            return False
+        before, seen = looked
+        self._refuted.setdefault(oid, []).append(seen)
+        self.belief[oid] = before
+        return True
+
     def _same_failure(self, step: dict, failure: str) -> int:
         """How many times in a row `step` has now failed with `failure`, the scene unchanged."""
-        tol = self.domain.tolerance
         last = self._repeated
         again = (
             last is not None
             and last[0]["object"] == step["object"]
             and last[1] == failure
-            and se3.within_tolerance(
-                last[0]["target_pose"],
-                step["target_pose"],
-                trans_tol=tol.translation,
-                rot_tol=tol.rotation,
-            )
+            and self._near(last[0]["target_pose"], step["target_pose"])
         )
         times = last[2] + 1 if again and last is not None else 1
         self._repeated = (step, failure, times)
@@ -212,8 +247,8 @@ class ClosedLoop:
 
     def _differences(self, seen: list[dict]) -> list[str]:
         """What the observation shows otherwise than believed, beyond the scoring tolerance;
-        the belief takes what was seen there. Unseen objects keep their believed pose."""
-        tol = self.domain.tolerance
+        the belief takes what was seen there. Unseen objects keep their believed pose, and so
+        do objects seen where a grasp already found nothing."""
         off = []
         for r in seen or []:
             try:
@@ -227,13 +262,14 @@ class ClosedLoop:
             if before is None:
                 off.append(f"{oid} seen, not believed")
             else:
-                symmetries = list(self.domain.symmetries(mesh)) if mesh in self.domain.mesh_specs \
-                    else [np.eye(4)]  # fmt: skip
-                if se3.within_tolerance(T, before, trans_tol=tol.translation,
-                                        rot_tol=tol.rotation, symmetries=symmetries):  # fmt: skip
+                if self._near(T, before, mesh):
                     continue
-                t, _ = se3.pose_error(T, before, symmetries)
+                if any(self._near(T, bad, mesh) for bad in self._refuted.get(oid, [])):
+                    continue  # seen there before, and a grasp there found nothing
+                t, _ = se3.pose_error(T, before, self._symmetries(mesh))
                 off.append(f"{oid} is {1000 * t:.0f} mm from where it was believed")
+                earlier = self._looked.get(oid)
+                self._looked[oid] = (earlier[0] if earlier else before, T)
             self.belief[oid] = T
             self.meshes[oid] = mesh
         return off

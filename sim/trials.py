@@ -595,6 +595,7 @@ class _ClosedTrial:
                 loop.give_up("the trial's wall-clock deadline passed")
                 break
             why: str | None = None
+            missed = False  # the hand closed on nothing: the object was not where believed
             if self.injector.skips():
                 ok = True
             else:
@@ -607,6 +608,7 @@ class _ClosedTrial:
                 if result.failure is not None:
                     last_failure = replace(result.failure, step=k)
                     why = f"{result.failure.kind}: {result.failure.reason}"
+                    missed = result.failure.kind == "grasp_failed"
                     if result.failure.kind == "deadline":
                         loop.give_up("the trial's wall-clock deadline passed")
                         break
@@ -614,7 +616,7 @@ class _ClosedTrial:
             seen = self.look(k)
             t = time.perf_counter()
             try:
-                step = loop.report(ok=ok, observation=seen, failure=why)
+                step = loop.report(ok=ok, observation=seen, failure=why, missed=missed)
             except Exception as e:
                 loop.give_up(f"a program failed: {type(e).__name__}: {clip(str(e))}")
                 step = None

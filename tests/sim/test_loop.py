@@ -163,6 +163,37 @@ def test_another_failure_or_a_changed_scene_starts_the_count_again(cubes):
     assert loop.status == "gave_up" and "failed 2 times in a row" in loop.reason
 
 
+def test_a_look_refuted_by_a_grasp_on_air_is_undone(cubes):
+    """A camera that reads a part 40 mm off where a placement put it: the loop believes the
+    look, the hand closes on nothing there, and the loop goes back to what it believed before,
+    no longer believing that look when it comes again."""
+    programs = Scripted()
+    loop = ClosedLoop(cubes, programs)
+    a0, b0, a1, b1 = _at(0.5, 0.0), _at(0.5, 0.1), _at(0.4, 0.0), _at(0.4, 0.1)
+    loop.begin(_obs(a=a0, b=b0), _obs(a=a1, b=b1))
+    phantom = _at(0.44, 0.0)
+    step = loop.report(ok=True, observation=_obs(a=phantom, b=b0))  # a read 40 mm off
+    assert step["object"] == "a" and loop.replans == 1  # to put a back from the phantom
+    empty = "grasp_failed: the jaws closed to 0 mm on a 40 mm grasp: nothing is held"
+    step = loop.report(ok=False, observation=_obs(a=phantom, b=b0), failure=empty, missed=True)
+    assert np.allclose(loop.belief["a"], a1)  # where its placement put it
+    assert "a was not where a look had put it" in loop.events[-2].detail
+    assert step["object"] == "b"  # the replan from the undone look moves on
+    assert loop.report(ok=True, observation=_obs(a=phantom, b=b1)) is None  # not believed again
+    assert loop.status == "done" and loop.replans == 2
+
+
+def test_a_grasp_on_air_where_no_look_moved_the_belief_is_a_plain_failure(cubes):
+    programs = Scripted()
+    loop = ClosedLoop(cubes, programs)
+    a0, a1 = _at(0.5, 0.0), _at(0.4, 0.0)
+    loop.begin(_obs(a=a0), _obs(a=a1))
+    empty = "grasp_failed: nothing is held"
+    loop.report(ok=False, observation=_obs(a=a0), failure=empty, missed=True)
+    assert loop.report(ok=False, observation=_obs(a=a0), failure=empty, missed=True) is None
+    assert "failed 2 times in a row" in loop.reason
+
+
 def test_an_infeasible_replan_gives_up_saying_so(cubes):
     programs = Scripted()
     loop = ClosedLoop(cubes, programs)
