@@ -118,7 +118,9 @@ def make_policy(
         if folder is None:
             raise UsageError("policy 'run' needs an authoring run's folder")
         programs = Path(folder) / "frozen"
-        return ProgramPolicy(from_folder(domain, programs), f"run {folder}", sandbox=sandbox, fit=fit)
+        return ProgramPolicy(
+            from_folder(domain, programs), f"run {folder}", sandbox=sandbox, fit=fit
+        )
     if kind == "runs":
         raise UsageError(
             "'runs DIR' is a study, not one policy: `rivet eval DOMAIN --policy runs DIR` "

@@ -28,7 +28,9 @@ def _solve(tmp_path, capsys, *, programs: str, images: str, camera: str = "front
     folders = [
         str(write_observation(obs, tmp_path / images / side))
         for side, obs in zip(
-            ("start", "goal"), observations(domain, domain.benchmark()[0], view, HONEST), strict=True
+            ("start", "goal"),
+            observations(domain, domain.benchmark()[0], view, HONEST),
+            strict=True,
         )
     ]
     out = tmp_path / "out"
