@@ -76,17 +76,30 @@ def _instance(domain_name: str, seed: int) -> domains.Instance | None:
         return None
 
 
-def instances(domain: Domain, rng: np.random.Generator, n: int) -> list[domains.Instance]:
+def instances(
+    domain: Domain, rng: np.random.Generator, n: int, *, executable: bool = False
+) -> list[domains.Instance]:
     """`n` instances of the domain's generator at seeds drawn from `rng` (a seed the
-    generator cannot serve is replaced by another draw)."""
+    generator cannot serve is replaced by another draw). `executable`: also replace an
+    instance whose reference order the arm cannot carry out (`_executable`)."""
     out: list[domains.Instance] = []
     for _ in range(50 * max(n, 1)):
         if len(out) >= n:
             break
         inst = _instance(domain.name, int(rng.integers(FRESH_FROM, SEED_SPACE)))
-        if inst is not None:
+        if inst is not None and (not executable or _executable(domain.name, inst)):
             out.append(inst)
     return out
+
+
+def _executable(domain_name: str, inst: domains.Instance) -> bool:
+    """Whether the robot the plan checks hold a plan to (`checks.robot.robot_view`: the
+    hand's grasps and the arm's reach) can carry out the instance's reference order. The
+    generator asks only for a grasp of the hand; a case whose every plan the checks would
+    refuse is no test of a draft."""
+    from checks.robot import robot_view
+
+    return robot_view(domain_name).first_problem(records(inst.start), list(inst.order)).step is None
 
 
 @lru_cache(maxsize=256)
@@ -94,10 +107,12 @@ def _composed(domain_name: str, seed: int) -> domains.Instance | None:
     return domains.load(domain_name).composed_instance(seed)
 
 
-def composed(domain: Domain, rng: np.random.Generator, n: int) -> list[domains.Instance]:
+def composed(
+    domain: Domain, rng: np.random.Generator, n: int, *, executable: bool = False
+) -> list[domains.Instance]:
     """`n` composed instances (goals built from the task's parts, `Domain.composed_instance`)
-    with an order the robot can execute, at seeds drawn from `rng` (none when the domain has
-    no composer)."""
+    with an order the hand can execute (and the arm too, when `executable`), at seeds drawn
+    from `rng` (none when the domain has no composer)."""
     out: list[domains.Instance] = []
     if domain.composed_goals is None:
         return out
@@ -105,7 +120,7 @@ def composed(domain: Domain, rng: np.random.Generator, n: int) -> list[domains.I
         if len(out) >= n:
             break
         inst = _composed(domain.name, int(rng.integers(FRESH_FROM, SEED_SPACE)))
-        if inst is not None:
+        if inst is not None and (not executable or _executable(domain.name, inst)):
             out.append(inst)
     return out
 
@@ -346,7 +361,9 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
     if function == "perceive":
         cases["observations"] = perceive_cases(domain, budget, seed)
         return cases
-    pool = instances(domain, rng, budget.instances)
+    # plan's cases are ones the robot its checks hold a plan to can carry out; where every draw
+    # already was, a case seed names the same cases as before
+    pool = instances(domain, rng, budget.instances, executable=function == "plan")
     sides = ("start", "goal")
 
     def named(k: int, inst: domains.Instance) -> str:
@@ -369,7 +386,7 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
             for side in sides
         ]
     elif function == "plan":
-        pool = [*pool, *composed(domain, rng, budget.composed)]
+        pool = [*pool, *composed(domain, rng, budget.composed, executable=True)]
         cases["instances"] = [
             {
                 "name": named(k, inst),

@@ -10,6 +10,7 @@ vertically), and the arm has an IK solution at both ends of that grasp.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -76,3 +77,12 @@ class RobotView:
                 )
             state[oid] = (mesh, target)
         return StepProblem(step=None, checked=len(steps))
+
+
+@functools.lru_cache(maxsize=8)
+def robot_view(domain: str) -> RobotView:
+    """The executor's hand and arm for a domain's objects (shared: its caches pay off across
+    the drafts of an authoring run and the cases drawn for them)."""
+    import domains
+
+    return RobotView(domains.load(domain))

@@ -14,7 +14,6 @@ Everything is seeded, so the same draft gets the same report (timings aside).
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -37,7 +36,7 @@ from checks.context import (
 )
 from checks.inputs import build_cases, fresh_seed
 from checks.report import CheckResult, build_report
-from checks.robot import RobotView
+from checks.robot import robot_view
 from checks.rulebook import rule_map
 from checks.suites import perceive as perceive_suite
 from checks.suites import render as render_suite
@@ -165,13 +164,6 @@ def _draft_checks(
         check_fast_enough(function, draft, float(budget.online[function])),
     ]
     return checks, ctx
-
-
-@functools.lru_cache(maxsize=8)
-def robot_view(domain: str) -> RobotView:
-    """The executor's hand and arm for a domain's objects (shared: its caches pay off across
-    the drafts of an authoring run)."""
-    return RobotView(domains.load(domain))
 
 
 def _relate_states(

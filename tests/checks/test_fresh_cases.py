@@ -13,7 +13,7 @@ import pytest
 import domains
 from checks import report_markdown
 from checks.budget import Budget
-from checks.inputs import build_cases, case_seed, infeasible_goal, instances
+from checks.inputs import build_cases, case_seed, infeasible_goal, instances, records
 from domains.cameras import shows
 
 from .conftest import CASES_SEED, deps_of
@@ -157,3 +157,33 @@ def test_drawn_infeasible_goals_are_what_they_claim(name, kind):
             assert not problems, why  # it floats: nothing else is wrong with it
             edges = dom.reference_relations(goal)["edges"]
             assert edges is not None
+
+
+def test_plan_cases_are_instances_the_checked_robot_can_carry_out():
+    """The generator asks a grasp of the hand only; plan's checks also ask the arm to reach it.
+    A drawn instance whose own reference order the arm cannot reach would fail every correct
+    plan, so plan's cases leave it out (this seed's plain draw holds two, one composed)."""
+    from checks.inputs import _rng, composed
+    from checks.robot import robot_view
+
+    cubes = domains.load("cubes")
+    seed = case_seed(2, "plan", 4)
+    reach = robot_view("cubes")
+
+    def unreachable(pool):
+        return [
+            i.name
+            for i in pool
+            if reach.first_problem(records(i.start), list(i.order)).step is not None
+        ]
+
+    rng = _rng(seed, "plan")
+    plain = [*instances(cubes, rng, 8), *composed(cubes, rng, 6)]
+    assert unreachable(plain)  # what the filter is for: such draws exist
+    rng = _rng(seed, "plan")
+    kept = [*instances(cubes, rng, 8, executable=True), *composed(cubes, rng, 6, executable=True)]
+    assert len(kept) == 14 and unreachable(kept) == []
+    shown = build_cases(cubes, "plan", Budget(name="drawn"), seed)["instances"]
+    assert [c["start"][0]["pose"].tolist() for c in shown] == [
+        records(i.start)[0]["pose"].tolist() for i in kept
+    ]
