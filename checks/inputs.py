@@ -26,6 +26,7 @@ import numpy as np
 
 import domains
 from checks.budget import Budget
+from checks.robot import robot_view
 from contracts.errors import UsageError
 from contracts.functions import FUNCTIONS
 from domains import Domain
@@ -97,8 +98,6 @@ def _executable(domain_name: str, inst: domains.Instance) -> bool:
     hand's grasps and the arm's reach) can carry out the instance's reference order. The
     generator asks only for a grasp of the hand; a case whose every plan the checks would
     refuse is no test of a draft."""
-    from checks.robot import robot_view
-
     return robot_view(domain_name).first_problem(records(inst.start), list(inst.order)).step is None
 
 
