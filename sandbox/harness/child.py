@@ -37,7 +37,6 @@ from .lockdown import install as install_filter
 RESULT_FD = 3
 REQUEST_FD = 4
 _PR_SET_DUMPABLE = 4
-SESSION_NICE = 19  # a session's processes yield the CPU to the harness and the template
 MAX_MESSAGE = 4000  # [chars]
 MAX_TRACEBACK = 8000  # [chars]
 MAX_PROGRAM_FILE = 1 << 20  # [bytes] program.json
@@ -139,10 +138,6 @@ def _isolate(
     resource.setrlimit(resource.RLIMIT_DATA, (data, data))
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     if lockdown:
-        # Lowest priority within the container: a program that starts hundreds of busy
-        # processes cannot starve PID 1 of the moments it needs to stop them on time. Without
-        # CAP_SYS_NICE (and with RLIMIT_NICE at 0) nothing the program starts can raise it again.
-        os.setpriority(os.PRIO_PROCESS, 0, SESSION_NICE)
         # Its /proc files (oom_score_adj among them) become root's, and the filter keeps it
         # so: no prctl(PR_SET_DUMPABLE, 1), no exec. Then nothing it starts can lower its OOM
         # preference below the harness's, or signal the template or PID 1.

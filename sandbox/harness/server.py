@@ -761,7 +761,13 @@ class _Child:
         return True
 
     def kill(self) -> None:
+        """SIGKILL the session's process and its process group (it leads one: `setsid`) in one
+        go: the kernel also delivers a group signal to a child forked while it is sent, so
+        a fork bomb ends at once instead of slowing the death of each process it outnumbers.
+        What left the group is killed when the session closes."""
         if self.status is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.pid, signal.SIGKILL)
             with contextlib.suppress(ProcessLookupError):
                 os.kill(self.pid, signal.SIGKILL)
 
