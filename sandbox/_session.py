@@ -400,7 +400,7 @@ class HarnessSession(Session):
         if self.dead:
             return CallReport(verdict="closed", detail=self.dead)
         try:
-            text, blob = wire.encode_value(
+            text, arrays = wire.encode_tree(
                 {"args": _consts(list(args)), "kwargs": _consts(kwargs)}, max_bytes=MAX_INPUT
             )
         except wire.BadValue as e:
@@ -417,11 +417,22 @@ class HarnessSession(Session):
             "op": op,
             "timeout_s": timeout_s,
         }
+        staged = None
+        if arrays:  # the child reads them from the staged folder (read-only to the container)
+            staged = self.staged / "args" / f"c{self.calls}.npz"
+            staged.parent.mkdir(mode=0o755, exist_ok=True)
+            with open(staged, "wb") as f:
+                wire.write_npz(f, arrays)
+            staged.chmod(0o644)
+            request["arrays_file"] = staged.name
         try:
-            head, sections = ex._exchange(request, (text, blob), timeout_s + GRACE_S)
+            head, sections = ex._exchange(request, (text, b""), timeout_s + GRACE_S)
         except _HarnessBroke as e:
             self.dead = e.detail
             return CallReport(verdict=e.verdict, detail=e.detail)  # type: ignore[arg-type]
+        finally:
+            if staged is not None:
+                staged.unlink(missing_ok=True)
         if head.get("kind") != "answer" or head.get("id") != self.id:
             ex._discard()
             self.dead = "the harness answered out of turn; restarted"

@@ -80,7 +80,7 @@ def serve(
         request = _next_request(reader)
         if request is None:
             os._exit(0)
-        _write(program.answer(*request, output_limit=output_limit))
+        _write(program.answer(*request, output_limit=output_limit, input_limit=request_limit))
 
 
 def _write(frame: bytes) -> None:
@@ -157,7 +157,10 @@ def _status_kib(key: str) -> int:
 class _Program:
     """The loaded modules and the constants calls may refer to."""
 
-    def __init__(self, modules: dict[str, Any], constants: dict[str, Any], files: set[str]):
+    def __init__(
+        self, root: Path, modules: dict[str, Any], constants: dict[str, Any], files: set[str]
+    ):
+        self.root = root
         self.modules = modules
         self.constants = constants
         self.files = files
@@ -178,13 +181,20 @@ class _Program:
             for name, kind in spec["constants"]["kinds"].items():
                 constants[name] = _materialize(kind, raw[name])
         modules = _load_modules(sources)
-        return _Program(modules, constants, {f"{name}.py" for name in sources})
+        return _Program(root, modules, constants, {f"{name}.py" for name in sources})
 
     def answer(
-        self, header: Mapping[str, Any], sections: list[bytes], *, output_limit: int
+        self,
+        header: Mapping[str, Any],
+        sections: list[bytes],
+        *,
+        output_limit: int,
+        input_limit: int,
     ) -> bytes:
         """The frame answering one request: ``op`` "call" (the default) calls a function,
-        "attribute" returns a module attribute's value, "signature" describes a function."""
+        "attribute" returns a module attribute's value, "signature" describes a function.
+        A call's arrays come in its second section, or in the file ``args/<arrays_file>`` of
+        the program's folder (named by the harness, written by the host)."""
         try:
             op = header.get("op", "call")
             if op == "attribute":
@@ -195,7 +205,10 @@ class _Program:
                 fn = self._function(header)
                 if len(sections) != 2:
                     raise ValueError("a call request carries its arguments in two sections")
-                args = wire.decode_value(sections[0], sections[1], max_bytes=1 << 40)
+                blob = sections[1]
+                if header.get("arrays_file"):
+                    blob = _read(self.root / "args" / str(header["arrays_file"]), input_limit)
+                args = wire.decode_value(sections[0], blob, max_bytes=1 << 40)
                 value = fn(*self._resolve(args["args"]), **self._resolve(args["kwargs"]))
             text, blob = wire.encode_value(value, max_bytes=output_limit)
         except wire.BadValue as e:

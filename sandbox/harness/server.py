@@ -18,7 +18,9 @@ and POSIX IPC object, and wipes the scratch file systems within a time bound; a 
 cannot finish says so and the host replaces the container.
 
 Requests (host → here): ``open`` (stage dir, limits) → ``opened``; ``call`` (module, function,
-budget; two sections: arguments as JSON + .npz) → ``answer``; ``close`` → ``closed``;
+budget; two sections: arguments as JSON + .npz, the .npz empty when ``arrays_file`` names it in
+the staged ``args/`` folder, which the child then reads itself: a 6 MB observation skips two
+copies, through the container's attach stream and the request pipe) → ``answer``; ``close`` → ``closed``;
 ``warm`` / ``status`` → ``status``.
 
 Usage: python -m sandbox.harness.server [--local] [--tmp DIR] [--preload default|none|a,b]
@@ -30,6 +32,7 @@ import argparse
 import contextlib
 import ctypes
 import os
+import re
 import select
 import signal
 import stat
@@ -90,6 +93,7 @@ ENV_KEEP = (
 MAX_CONTROL = 1 << 20  # [bytes] an open/close/status request
 MAX_CALL = 320 << 20  # [bytes] a call request (its arguments)
 READ_CHUNK = 1 << 20  # [bytes]
+ARRAYS_FILE = re.compile(r"c[0-9]{1,9}\.npz")  # a call's arrays in the session's args/
 WIPE_BUDGET_S = 3.0  # [s] the post-session wipe; a longer one reports the container dirty
 MEMORY_POLL_S = 0.02  # [s] how often a call's loop reads the session's memory (at most)
 _PR_SET_DUMPABLE = 4
@@ -277,14 +281,17 @@ class Server:
             return {"kind": "error", "id": req.get("id"), "error": "no such open session"}, []
         if s.dead:
             return {"kind": "answer", "id": s.id, "verdict": "closed", "detail": s.dead}, []
-        request = wire.pack_frame(
-            {
-                "module": str(req.get("module")),
-                "function": str(req.get("function")),
-                "op": str(req.get("op", "call")),
-            },
-            sections,
-        )
+        forward = {
+            "module": str(req.get("module")),
+            "function": str(req.get("function")),
+            "op": str(req.get("op", "call")),
+        }
+        arrays_file = req.get("arrays_file")
+        if arrays_file is not None:
+            if not (isinstance(arrays_file, str) and ARRAYS_FILE.fullmatch(arrays_file)):
+                return {"kind": "error", "id": s.id, "error": "malformed arrays_file"}, []
+            forward["arrays_file"] = arrays_file
+        request = wire.pack_frame(forward, sections)
         head, out = s.exchange(request, sections, float(req["timeout_s"]), _oom_kills())
         head.update(kind="answer", id=s.id, alive=not s.dead and s.status is None)
         if head.get("verdict") == "returned":

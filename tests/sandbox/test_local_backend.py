@@ -93,6 +93,29 @@ def test_a_session_answers_calls_in_order_with_their_errors(local_executor):
     assert answers[1].verdict == "exception" and answers[1].exception.message == "negative"
 
 
+def test_a_calls_arrays_come_through_a_file_that_is_gone_once_it_answers(local_executor):
+    from sandbox import Program
+
+    source = (
+        "import os\n"
+        "def f(image, scale, args):\n"
+        "    seen = sorted(os.listdir(args))\n"
+        "    image *= scale\n"  # the program may write to its arguments
+        "    return {'image': image, 'seen': seen}\n"
+    )
+    image = np.arange(12, dtype=np.float32).reshape(3, 4)
+    with local_executor.open_session(Program(modules={"prog": source})) as session:
+        args = session.staged / "args"  # the local harness sees the host's paths
+        first = session.call("prog", "f", image, 2.0, str(args), timeout_s=5)
+        second = session.call("prog", "f", image, 3.0, str(args), timeout_s=5)
+        assert first.ok and second.ok, (first, second)
+        assert first.value["seen"] == ["c1.npz"] and second.value["seen"] == ["c2.npz"]
+        assert not any(args.iterdir()), "a call's arrays outlived its answer"
+    assert np.array_equal(first.value["image"], 2 * image)
+    assert np.array_equal(second.value["image"], 3 * image)
+    assert np.array_equal(image, np.arange(12, dtype=np.float32).reshape(3, 4))
+
+
 def test_unsendable_inputs_are_the_callers_mistake(local_executor):
     with pytest.raises(BadJob, match=r"arguments\.kwargs\.x"):
         run(local_executor, "def f(x):\n    return x\n", inputs={"x": object()})
