@@ -15,7 +15,7 @@ Everything is seeded, so the same draft gets the same report (timings aside).
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ from checks.robot import robot_view
 from checks.rulebook import rule_map
 from checks.suites import perceive as perceive_suite
 from checks.suites import render as render_suite
+from checks.suites._common import selected, selecting, unselected
 from checks.suites.plan import Unrelated
 from contracts.errors import UsageError
 from contracts.functions import FUNCTIONS
@@ -57,6 +58,7 @@ def run_checks(
     out_dir: Path | None = None,
     budget: Budget | None = None,
     cases_seed: int | None = None,
+    only: Collection[str] | None = None,
 ) -> dict[str, Any]:
     """Run one draft's full checks and return its check report.
 
@@ -77,6 +79,11 @@ def run_checks(
         budget: overrides `thorough` (tests and benchmarks).
         cases_seed: the seed the cases are drawn from (`checks.inputs`); None draws a fresh
             one. The report records it: the same seed draws the same cases.
+        only: check names (`rivet check --only`): only these run, with the interface and
+            schema checks they rest on; the others are reported skipped (and pass).
+
+    Raises:
+        UsageError: an unknown function, or an `only` name no check of it has.
 
     Returns:
         A dict valid against `check_report.schema.json`.
@@ -86,6 +93,12 @@ def run_checks(
     if function not in FUNCTIONS:
         raise UsageError(f"unknown function '{function}'; known: {', '.join(FUNCTIONS)}")
     dom = domains.load(domain)
+    rules = rule_map(dom, function)
+    unknown = sorted(set(only or ()) - set(rules))
+    if unknown:
+        raise UsageError(
+            f"no {function} check is named {', '.join(unknown)}; its checks: {', '.join(rules)}"
+        )
     budget = budget or (THOROUGH if thorough else DEFAULT)
     t0 = time.perf_counter()
     spec = DomainSpec.of(dom)
@@ -95,13 +108,14 @@ def run_checks(
     own = executor is None
     ex: sandbox.Executor = sandbox.open_executor("docker") if executor is None else executor
     try:
-        if function == "plan" and "relate" in deps:
-            _relate_states(ex, deps, cases, spec, budget)
-        checks, ctx = _draft_checks(ex, dom, spec, function, source, deps, cases, budget, out_dir)
-        if ctx is not None and function == "perceive":
-            renders = perceive_suite.aligned(ctx, _rerender(ex, deps, ctx, spec, budget))
-            checks.append(perceive_suite.accuracy(ctx, dom, renders, out_dir))
-            checks.append(perceive_suite.rerender(ctx, renders, out_dir))
+        with selecting(only):
+            if function == "plan" and "relate" in deps:
+                _relate_states(ex, deps, cases, spec, budget)
+            checks, ctx = _draft_checks(
+                ex, dom, spec, function, source, deps, cases, budget, out_dir
+            )
+            if ctx is not None and function == "perceive":
+                checks += _perceive_on_host(ex, dom, deps, ctx, spec, budget, out_dir)
     finally:
         if own:
             ex.close()
@@ -111,7 +125,7 @@ def run_checks(
         source=source,
         checks=checks,
         duration_s=time.perf_counter() - t0,
-        rules=rule_map(dom, function),
+        rules=rules,
     )
     report["cases_seed"] = seed
     return report
@@ -155,15 +169,48 @@ def _draft_checks(
         )
         checks += suites.SUITES[function](ctx)
         for prop in properties.properties_for(dom, function):
-            checks.append(properties.run_property_check(prop, ctx))
+            checks.append(
+                properties.run_property_check(prop, ctx)
+                if selected(prop.check_name)
+                else unselected(prop.check_name, "domain")
+            )
     if function == "render":
-        checks.append(render_suite.render_vs_simulator(ctx, out_dir))
+        checks.append(
+            render_suite.render_vs_simulator(ctx, out_dir)
+            if selected("image.render_vs_simulator")
+            else unselected("image.render_vs_simulator", "image")
+        )
     checks += [
         check_runs(draft),
         check_in_time(function, draft),
         check_fast_enough(function, draft, float(budget.online[function])),
     ]
     return checks, ctx
+
+
+def _perceive_on_host(
+    ex: Executor,
+    dom: Any,
+    deps: Mapping[str, str],
+    ctx: SuiteContext,
+    spec: DomainSpec,
+    budget: Budget,
+    out_dir: Path | None,
+) -> list[CheckResult]:
+    """`perceive`'s accuracy against the truth and its re-render against the observations,
+    judged on the host from what the suite left in ``ctx.outputs``."""
+    wanted = [selected("property.accuracy"), selected("image.perceive_rerender")]
+    renders = (
+        perceive_suite.aligned(ctx, _rerender(ex, deps, ctx, spec, budget)) if any(wanted) else {}
+    )
+    return [
+        perceive_suite.accuracy(ctx, dom, renders, out_dir)
+        if wanted[0]
+        else unselected("property.accuracy", "property"),
+        perceive_suite.rerender(ctx, renders, out_dir)
+        if wanted[1]
+        else unselected("image.perceive_rerender", "image"),
+    ]
 
 
 def _relate_states(

@@ -5,7 +5,9 @@ from __future__ import annotations
 import time
 import traceback
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import Any
 
 import numpy as np
@@ -106,10 +108,44 @@ def first_difference(a: Any, b: Any, path: str = "", atol: float = 1e-9) -> str:
     return "" if same_value(a, b, atol) else (path.lstrip(".") or "(root)")
 
 
+_ONLY: ContextVar[frozenset[str] | None] = ContextVar("rivet_checks_only", default=None)
+ALWAYS_RUN = ("interface.", "schema.")  # what every other check rests on
+
+
+@contextmanager
+def selecting(names: Collection[str] | None) -> Iterator[None]:
+    """Within it, only the checks `names` run (with the interface and schema checks, which
+    the others rest on); the others are reported skipped. None: every check runs."""
+    token = _ONLY.set(None if names is None else frozenset(names))
+    try:
+        yield
+    finally:
+        _ONLY.reset(token)
+
+
+def selected(name: str) -> bool:
+    names = _ONLY.get()
+    return names is None or name.startswith(ALWAYS_RUN) or name in names
+
+
+def unselected(name: str, category: str) -> CheckResult:
+    """The report's entry for a check left out by `selecting`: skipped, and no failure."""
+    return CheckResult(
+        name=name,
+        category=category,  # type: ignore[arg-type]
+        status="skipped",
+        message="not run: other checks were asked for (--only)",
+        optional="not asked for (--only)",
+    )
+
+
 def run_check(
     name: str, category: str, body: Callable[[CheckResult], None], **fields: Any
 ) -> CheckResult:
-    """Run `body(result)`, which fills `result` in; a `Failure` it raises fails the check."""
+    """Run `body(result)`, which fills `result` in; a `Failure` it raises fails the check.
+    A check `selecting` leaves out is not run."""
+    if not selected(name):
+        return unselected(name, category)
     r = CheckResult(name=name, category=category, **fields)  # type: ignore[arg-type]
     t0 = time.perf_counter()
     try:

@@ -10,7 +10,8 @@ stands in for it (its reference relations when checking `plan`, the toolbox rend
 when re-rendering what `perceive` found).
 
 The cases are drawn afresh on every run (`checks.inputs`); the report names the seed they were
-drawn from, and `--seed S` draws the same ones again.
+drawn from, and `--seed S` draws the same ones again. `--only NAME` runs one check alone (with
+the interface and schema checks every other rests on), e.g. to see a fix of one failure.
 """
 
 from __future__ import annotations
@@ -63,6 +64,13 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON instead")
     p.add_argument(
+        "--only",
+        action="append",
+        metavar="NAME",
+        help="run only the check NAME (repeatable; e.g. property.translation_invariant), with "
+        "the interface and schema checks it rests on; the others are reported skipped",
+    )
+    p.add_argument(
         "--seed",
         type=_seed,
         metavar="S",
@@ -112,11 +120,23 @@ def run(args: argparse.Namespace) -> int:
     if args.system is not None:
         if args.function is not None or args.file is not None:
             raise UsageError("--system DIR runs the trial gate alone: give no FUNCTION or FILE")
+        if args.only:
+            raise UsageError("--only picks checks of one draft: give FUNCTION and FILE.py")
         return _gate(args)
     if args.function is None or args.file is None:
         raise UsageError("give FUNCTION and FILE.py (or --system DIR for the trial gate)")
     if args.trials is not None:
         raise UsageError("--trials is the trial gate's: use it with --system DIR")
+    if args.only:
+        from checks.rulebook import rule_map
+
+        known = rule_map(domains.load(args.domain), args.function)
+        unknown = sorted(set(args.only) - set(known))
+        if unknown:
+            raise UsageError(
+                f"--only: no {args.function} check is named {', '.join(unknown)}; its checks: "
+                + ", ".join(known)
+            )
     source = _read(args.file, "draft")
     deps = dependencies(args.function, args.deps)
     standing_in = [d for d in CODE_DEPS[args.function] if d not in deps]
@@ -133,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
             executor=executor,
             out_dir=out,
             cases_seed=args.seed,
+            only=args.only,
         )
     if args.json:
         json.dump(report, sys.stdout, indent=1)
@@ -143,6 +164,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"{mark[c['status']]} {c['name']}")
         print()
         print(report_markdown(report))
+        if args.only:
+            left = sum(c.get("optional") == "not asked for (--only)" for c in report["checks"])
+            print(f"\n(--only: {left} other checks not run)")
         if standing_in:
             print(f"\n(ground truth stood in for: {', '.join(standing_in)})")
         print(f"images: {out}" if any(c.get("images") for c in report["checks"]) else "")
