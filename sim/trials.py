@@ -371,7 +371,10 @@ def run_trial(
         problems = check_order(domain, instance.start, steps, instance.goal, physics=False)
         plan_ok = not problems
         if problems:
-            plan_failure = f"{problems[0].object}: {problems[0].problem}"
+            first = problems[0]
+            plan_failure = (
+                first.problem if first.object is None else f"{first.object}: {first.problem}"
+            )
             failure = failure or ("planning", plan_failure)
 
     # -- execution in physics ---------------------------------------------------------------

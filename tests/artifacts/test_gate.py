@@ -80,3 +80,24 @@ def test_gate_usage_errors(argv, message, tmp_path):
 
 def test_the_default_gate_is_documented():
     assert f"`GATE_TRIALS` = {GATE_TRIALS}" in (REPO / "docs" / "checks.md").read_text()
+
+
+def test_a_trial_the_robot_finished_is_marked_failed_when_held_against_a_program():
+    from artifacts.gate import GateResult
+
+    row = {"camera": "960x540", "state_ok": True, "failure": None, "blamed": None}
+    trials = [
+        {**row, "name": "trial01/generated", "plan_ok": True, "final_ok": True},
+        {
+            **row,
+            "name": "trial02/generated",
+            "plan_ok": False,
+            "final_ok": True,  # physics forgave what the plan got wrong on paper
+            "failure": {"stage": "planning", "reason": "the plan does not reach the goal"},
+            "blamed": "plan",
+        },
+    ]
+    text = GateResult(domain="tangram", seed=2, trials=trials, duration_s=1.0).markdown()
+    assert "held against `plan`" in text
+    assert "- ok trial01/generated" in text
+    assert "- FAIL trial02/generated (960x540) — planning: the plan does not reach" in text

@@ -87,6 +87,15 @@ def test_bad_plan_is_a_clear_execution_failure(cubes, kind):
     assert r.execution_failure["reason"]
 
 
+def test_a_plan_that_stops_short_says_so_without_naming_a_non_object(cubes):
+    domain, instance = cubes
+    assert len(instance.order) > 1
+    short = FixedPlan(lambda i: {"status": "ok", "steps": [dict(i.order[0])]})
+    r = run_trial(domain, instance, short)
+    assert not r.plan_ok
+    assert r.plan_failure.startswith("the plan does not reach the goal: "), r.plan_failure
+
+
 def test_harness_goes_on_after_failures(cubes):
     _, instance = cubes
     bad = FixedPlan(BAD_PLANS["unknown_object"])
