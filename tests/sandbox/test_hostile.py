@@ -9,6 +9,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from sandbox import VERDICTS, Job
@@ -34,6 +35,7 @@ def _inputs(draft: dict[str, Any], guard: HostGuard) -> dict[str, Any]:
         "host_paths": guard.host_paths,
         "canary_name": "ANTHROPIC_API_KEY",
         "host_marker": str(guard.marker),
+        "array": np.arange(12.0),  # a call's arrays travel in a staged file
     }
     return {arg: values[what] for arg, what in draft.get("inputs", {}).items()}
 
