@@ -93,12 +93,7 @@ def run_checks(
     if function not in FUNCTIONS:
         raise UsageError(f"unknown function '{function}'; known: {', '.join(FUNCTIONS)}")
     dom = domains.load(domain)
-    rules = rule_map(dom, function)
-    unknown = sorted(set(only or ()) - set(rules))
-    if unknown:
-        raise UsageError(
-            f"no {function} check is named {', '.join(unknown)}; its checks: {', '.join(rules)}"
-        )
+    rules = known_checks(dom, function, only)
     budget = budget or (THOROUGH if thorough else DEFAULT)
     t0 = time.perf_counter()
     spec = DomainSpec.of(dom)
@@ -129,6 +124,18 @@ def run_checks(
     )
     report["cases_seed"] = seed
     return report
+
+
+def known_checks(dom: Any, function: str, only: Collection[str] | None = None) -> dict[str, Any]:
+    """The rules of `function`'s checks in `dom` by check name; `UsageError` when `only` names
+    a check the function does not have (listing those it has)."""
+    rules = rule_map(dom, function)
+    unknown = sorted(set(only or ()) - set(rules))
+    if unknown:
+        raise UsageError(
+            f"no {function} check is named {', '.join(unknown)}; its checks: {', '.join(rules)}"
+        )
+    return rules
 
 
 def _draft_checks(

@@ -127,16 +127,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("give FUNCTION and FILE.py (or --system DIR for the trial gate)")
     if args.trials is not None:
         raise UsageError("--trials is the trial gate's: use it with --system DIR")
-    if args.only:
-        from checks.rulebook import rule_map
+    if args.only:  # before a sandbox starts
+        from checks.run import known_checks
 
-        known = rule_map(domains.load(args.domain), args.function)
-        unknown = sorted(set(args.only) - set(known))
-        if unknown:
-            raise UsageError(
-                f"--only: no {args.function} check is named {', '.join(unknown)}; its checks: "
-                + ", ".join(known)
-            )
+        known_checks(domains.load(args.domain), args.function, args.only)
     source = _read(args.file, "draft")
     deps = dependencies(args.function, args.deps)
     standing_in = [d for d in CODE_DEPS[args.function] if d not in deps]
