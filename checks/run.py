@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Collection, Mapping
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +41,7 @@ from checks.robot import robot_view
 from checks.rulebook import rule_map
 from checks.suites import perceive as perceive_suite
 from checks.suites import render as render_suite
-from checks.suites._common import selected, selecting, unselected
+from checks.suites._common import if_selected, selected, selecting
 from checks.suites.plan import Unrelated
 from contracts.errors import UsageError
 from contracts.functions import FUNCTIONS
@@ -177,15 +178,17 @@ def _draft_checks(
         checks += suites.SUITES[function](ctx)
         for prop in properties.properties_for(dom, function):
             checks.append(
-                properties.run_property_check(prop, ctx)
-                if selected(prop.check_name)
-                else unselected(prop.check_name, "domain")
+                if_selected(
+                    prop.check_name, "domain", partial(properties.run_property_check, prop, ctx)
+                )
             )
     if function == "render":
         checks.append(
-            render_suite.render_vs_simulator(ctx, out_dir)
-            if selected("image.render_vs_simulator")
-            else unselected("image.render_vs_simulator", "image")
+            if_selected(
+                "image.render_vs_simulator",
+                "image",
+                lambda: render_suite.render_vs_simulator(ctx, out_dir),
+            )
         )
     checks += [
         check_runs(draft),
@@ -206,17 +209,19 @@ def _perceive_on_host(
 ) -> list[CheckResult]:
     """`perceive`'s accuracy against the truth and its re-render against the observations,
     judged on the host from what the suite left in ``ctx.outputs``."""
-    wanted = [selected("property.accuracy"), selected("image.perceive_rerender")]
-    renders = (
-        perceive_suite.aligned(ctx, _rerender(ex, deps, ctx, spec, budget)) if any(wanted) else {}
-    )
+    wanted = selected("property.accuracy") or selected("image.perceive_rerender")
+    renders = perceive_suite.aligned(ctx, _rerender(ex, deps, ctx, spec, budget)) if wanted else {}
     return [
-        perceive_suite.accuracy(ctx, dom, renders, out_dir)
-        if wanted[0]
-        else unselected("property.accuracy", "property"),
-        perceive_suite.rerender(ctx, renders, out_dir)
-        if wanted[1]
-        else unselected("image.perceive_rerender", "image"),
+        if_selected(
+            "property.accuracy",
+            "property",
+            lambda: perceive_suite.accuracy(ctx, dom, renders, out_dir),
+        ),
+        if_selected(
+            "image.perceive_rerender",
+            "image",
+            lambda: perceive_suite.rerender(ctx, renders, out_dir),
+        ),
     ]
 
 

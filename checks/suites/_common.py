@@ -128,6 +128,9 @@ def selected(name: str) -> bool:
     return names is None or name.startswith(ALWAYS_RUN) or name in names
 
 
+NOT_ASKED = "not asked for (--only)"  # why a check `selecting` leaves out is no failure
+
+
 def unselected(name: str, category: str) -> CheckResult:
     """The report's entry for a check left out by `selecting`: skipped, and no failure."""
     return CheckResult(
@@ -135,8 +138,14 @@ def unselected(name: str, category: str) -> CheckResult:
         category=category,  # type: ignore[arg-type]
         status="skipped",
         message="not run: other checks were asked for (--only)",
-        optional="not asked for (--only)",
+        optional=NOT_ASKED,
     )
+
+
+def if_selected(name: str, category: str, check: Callable[[], CheckResult]) -> CheckResult:
+    """`check()` when `selecting` keeps `name`, else its skipped entry (for checks that build
+    their result themselves rather than through `run_check`)."""
+    return check() if selected(name) else unselected(name, category)
 
 
 def run_check(
