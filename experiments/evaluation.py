@@ -74,8 +74,10 @@ _WORKER: dict[str, Any] = {}
 
 def _init_worker(config: EvalConfig) -> None:
     import domains
+    from sim.trials import prepare
 
     _WORKER["domain"] = domains.load(config.domain)
+    prepare(_WORKER["domain"], record=config.record_root is not None)
     _WORKER["policy"] = make_policy(config)
     _WORKER["config"] = config
 

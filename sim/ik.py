@@ -34,7 +34,7 @@ logging.getLogger("mink").setLevel(logging.WARNING)
 
 @functools.cache
 def _ik_model() -> mujoco.MjModel:
-    return robot.build_robot_spec().compile()
+    return robot.build_robot_spec(visuals=False).compile()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -121,6 +121,12 @@ class Renderer:
                 f"{model.vis.global_.offwidth}×{model.vis.global_.offheight}"
             )
         self.model = model
+        # The context's framebuffers sized to this renderer's images, not to the largest the
+        # model allows: the same pixels, and a multisampled 1920×1080 buffer would hold
+        # about 50 MB more of a CPU rasteriser's memory than a 1280×720 one.
+        g = model.vis.global_
+        saved = (g.offwidth, g.offheight)
+        g.offwidth, g.offheight = width, height
         try:
             self._gl = mujoco.Renderer(model, height=height, width=width)
         except Exception as e:  # the GL backend reports many kinds of errors
@@ -128,6 +134,8 @@ class Renderer:
                 f"cannot open an offscreen OpenGL context ({e}); on a headless machine set "
                 "MUJOCO_GL=egl and PYOPENGL_PLATFORM=egl"
             ) from e
+        finally:
+            g.offwidth, g.offheight = saved
         self._cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, RENDER_CAMERA)
         if self._cam < 0:
             raise SimError(

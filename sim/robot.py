@@ -13,8 +13,10 @@ y axis along the jaws' closing direction (the gripper's own frame).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import pathlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import mujoco
@@ -96,11 +98,73 @@ def _absolute_meshdir(spec: mujoco.MjSpec) -> None:
     raise RobotModelError(f"cannot find mesh {first.file!r} under {[str(c) for c in candidates]}")
 
 
-def _arm_with_gripper() -> mujoco.MjSpec:
+def _is_visual(geom: mujoco.MjsGeom) -> bool:
+    """A menagerie visual geom: a mesh that takes part in no collision."""
+    return geom.type == mujoco.mjtGeom.mjGEOM_MESH and geom.contype == 0 and geom.conaffinity == 0
+
+
+def _strip_visuals(spec: mujoco.MjSpec, prefix: str) -> None:
+    """Remove the visual meshes of a menagerie spec, in place, keeping every body's inertia.
+
+    A body whose inertia the compiler derives from its geoms (no explicit inertial) is given,
+    explicitly, the inertia it has with its visual geoms (`_geom_inertials`), so the physics
+    of the stripped robot is the full robot's to the last bit (a test steps both).
+    """
+    inertials = _geom_inertials()
+    for body in spec.bodies:
+        if body.name != spec.worldbody.name and not body.explicitinertial:
+            mass, ipos, iquat, inertia = inertials[prefix + body.name]
+            body.explicitinertial = True
+            body.mass, body.ipos, body.iquat, body.inertia = mass, ipos, iquat, inertia
+    for geom in list(spec.geoms):
+        if _is_visual(geom):
+            spec.delete(geom)
+    used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
+    for mesh in list(spec.meshes):
+        if mesh.name not in used:
+            spec.delete(mesh)
+
+
+@functools.cache
+def _geom_inertials() -> dict[str, tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
+    """(mass, ipos, iquat, inertia) of each robot body as the compiler derives them from the
+    full model's geoms: compiled once per process, without filling MuJoCo's mesh cache (the
+    robot's visual meshes would hold about 120 MB there)."""
+    spec = mujoco.MjSpec()
+    attach_robot(spec, visuals=True)
+    with no_mesh_cache():
+        model = spec.compile()
+    return {
+        model.body(b).name: (
+            float(model.body_mass[b]),
+            model.body_ipos[b].copy(),
+            model.body_iquat[b].copy(),
+            model.body_inertia[b].copy(),
+        )
+        for b in range(1, model.nbody)
+    }
+
+
+@contextlib.contextmanager
+def no_mesh_cache() -> Iterator[None]:
+    """MuJoCo's global mesh cache off for one compile."""
+    cache = mujoco.mj_getCache()
+    capacity = mujoco.mj_getCacheCapacity(cache)
+    mujoco.mj_setCacheCapacity(cache, 0)
+    try:
+        yield
+    finally:
+        mujoco.mj_setCacheCapacity(cache, capacity)
+
+
+def _arm_with_gripper(*, visuals: bool = True) -> mujoco.MjSpec:
     arm = _load_spec("franka_fr3", "fr3")
     gripper = _load_spec("robotiq_2f85", "2f85")
     _absolute_meshdir(arm)
     _absolute_meshdir(gripper)
+    if not visuals:
+        _strip_visuals(arm, PREFIX)
+        _strip_visuals(gripper, f"{PREFIX}gripper/")
     # The 2F-85's joint ranges are authored in radians (its file says so); a copy whose
     # <compiler angle="radian"/> line is missing would read them as degrees.
     gripper.compiler.degree = False
@@ -126,15 +190,19 @@ def _arm_with_gripper() -> mujoco.MjSpec:
     return arm
 
 
-def attach_robot(spec: mujoco.MjSpec) -> None:
+def attach_robot(spec: mujoco.MjSpec, *, visuals: bool = True) -> None:
     """Add the FR3 + 2F-85 at the world origin of `spec`, in place.
+
+    `visuals=False` leaves out the robot's visual meshes (about 380,000 vertices, 60 MB of
+    model and three times that while compiling), with the same physics to the last bit: for a
+    model nothing renders the robot in (the trials' physics, the IK).
 
     Also sets the options that attaching drops (elliptic friction cones, impratio 10, the
     implicitfast integrator), gravity compensation on the robot's bodies (the FR3 compensates
     gravity in its own controller), a keyframe `robot/park`, the TCP site and the inactive weld
     the executor's optional weld assist uses. Every added name starts with `PREFIX`.
     """
-    arm = _arm_with_gripper()
+    arm = _arm_with_gripper(visuals=visuals)
     spec.option.integrator = _INTEGRATOR
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     spec.option.impratio = 10.0
@@ -152,11 +220,11 @@ def attach_robot(spec: mujoco.MjSpec) -> None:
     )
 
 
-def build_robot_spec() -> mujoco.MjSpec:
+def build_robot_spec(*, visuals: bool = True) -> mujoco.MjSpec:
     """A spec holding only the robot (no floor): the IK's kinematic model."""
     spec = mujoco.MjSpec()
     spec.modelname = "rivet_robot"
-    attach_robot(spec)
+    attach_robot(spec, visuals=visuals)
     return spec
 
 

@@ -280,8 +280,14 @@ def set_lighting(model: mujoco.MjModel, data: mujoco.MjData, lighting: Lighting)
 # -- building -------------------------------------------------------------------------------
 
 
-def build_spec(domain: Domain, scene: Mapping, *, with_robot: bool = False) -> mujoco.MjSpec:
-    """The MuJoCo spec of a (parsed) scene: world, cameras and objects at their poses."""
+def build_spec(
+    domain: Domain, scene: Mapping, *, with_robot: bool = False, robot_visuals: bool = True
+) -> mujoco.MjSpec:
+    """The MuJoCo spec of a (parsed) scene: world, cameras and objects at their poses.
+
+    `robot_visuals=False`: the robot without its visual meshes, the same physics
+    (`sim.robot.attach_robot`), for a model that is simulated but never rendered.
+    """
     spec = mujoco.MjSpec()
     spec.modelname = f"rivet_{domain.name}"
     spec.option.timestep = TIMESTEP
@@ -323,7 +329,7 @@ def build_spec(domain: Domain, scene: Mapping, *, with_robot: bool = False) -> m
             if e.name != "sim.robot":
                 raise
             raise SimError("with_robot=True but sim.robot is not available yet") from None
-        robot.attach_robot(spec)
+        robot.attach_robot(spec, visuals=robot_visuals)
     return spec
 
 

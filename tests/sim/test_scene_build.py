@@ -89,7 +89,7 @@ def test_with_robot_calls_the_robot_hook(cubes, monkeypatch):
 
     calls = []
     fake = types.ModuleType("sim.robot")
-    fake.attach_robot = lambda spec: calls.append(spec)
+    fake.attach_robot = lambda spec, visuals: calls.append(spec)
     monkeypatch.setitem(sys.modules, "sim.robot", fake)
     s = sim_scene.parse_scene(cubes, {"domain": "cubes", "objects": [_cube()]})
     spec = sim_scene.build_spec(cubes, s, with_robot=True)
