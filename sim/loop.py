@@ -27,7 +27,7 @@ with status ``gave_up`` and says which bound it met. An object the new observati
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -133,16 +133,21 @@ class ClosedLoop:
     # -- after each transfer ------------------------------------------------------------------
 
     def report(self, *, ok: bool, observation: Mapping[str, Any], failure: str | None = None,
-               missed: bool = False) -> dict | None:  # fmt: skip
+               missed: bool = False,
+               look_again: Callable[[], Mapping[str, Any]] | None = None) -> dict | None:  # fmt: skip
         """The robot carried out the step last handed out (`ok`: its own sensors saw no
         failure; `failure`: what they said; `missed`: the hand closed on nothing where the
         object was believed) and looked again: the next step, or None when the loop has ended
         (`status`).
 
-        A look can be wrong too (a part half hidden, a camera `perceive` reads poorly): when
-        the hand closes on nothing where a look had moved an object's belief, that look is
-        refuted — the object is believed where it was before, and a later look that shows it
-        at the refuted pose again is not believed."""
+        A look can be wrong too (a part half hidden, a camera `perceive` reads poorly). With
+        `look_again` (how to take another observation of the scene as it now is), a look that
+        shows an object off its believed pose is checked by a second one, and only what both
+        show, within the scoring tolerance of each other, is believed: a poorly read part lands
+        somewhere else on each look, a moved part stays where it was moved. And when the hand
+        closes on nothing where a look had moved an object's belief, that look is refuted —
+        the object is believed where it was before, and a later look that shows it at the
+        refuted pose again is not believed."""
         if self.status != "running" or self._current is None:
             raise RuntimeError("report() follows a step handed out by begin/adopt/report")
         step, self._current = self._current, None
@@ -158,14 +163,21 @@ class ClosedLoop:
         recalled = not ok and missed and self._recall(oid)  # before the new look is judged
         seen = self.programs.perceive(observation)
         self.observations += 1
+        unconfirmed: list[str] = []
+        if look_again is not None and any(self._away(r) is not None for r in seen or []):
+            again = self.programs.perceive(look_again())
+            self.observations += 1
+            seen, unconfirmed = self._confirmed(seen, again)
         off = self._differences(seen)
         self.events.append(LoopEvent(
             kind="observed", step=self.reported,
-            detail=("as expected" if not off and ok else
+            detail=("as expected" if not off and ok and not unconfirmed else
                     "; ".join(([f"the step failed: {clip(failure or 'no reason', 160)}"]
                                if not ok else []) + off[:4] +
                               ([f"{oid} was not where a look had put it: believed where it "
-                                "was before"] if recalled else []))),
+                                "was before"] if recalled else []) +
+                              ([f"a second look did not confirm {', '.join(unconfirmed[:4])}: "
+                                "believed where it was"] if unconfirmed else []))),
         ))  # fmt: skip
         if ok and not off:
             self._repeated = None
@@ -245,27 +257,65 @@ class ClosedLoop:
             for oid, T in self.belief.items()
         ]
 
+    def _away(self, r: Any) -> tuple[str, np.ndarray, str] | None:
+        """(id, pose, mesh) of a seen record that differs from the belief beyond the scoring
+        tolerance (an object not believed at all included), and not at a pose a grasp found
+        empty; None otherwise."""
+        try:
+            oid, T = str(r["id"]), se3.as_matrix(r["pose"])
+        except (KeyError, TypeError, ValueError):
+            return None
+        if not se3.is_rigid(T, tol=1e-3):
+            return None
+        mesh = self.meshes.get(oid) or str(r.get("mesh", ""))
+        before = self.belief.get(oid)
+        if before is not None and (
+            self._near(T, before, mesh)
+            or any(self._near(T, bad, mesh) for bad in self._refuted.get(oid, []))
+        ):
+            return None
+        return oid, T, mesh
+
+    def _confirmed(self, seen: list[dict], again: list[dict]) -> tuple[list[dict], list[str]]:
+        """The records of `seen` that are as believed, or that `again` shows within the scoring
+        tolerance of where `seen` does; and, for the others, what the second look showed."""
+        second: dict[str, np.ndarray] = {}
+        for r in again or []:
+            try:
+                second[str(r["id"])] = se3.as_matrix(r["pose"])
+            except (KeyError, TypeError, ValueError):
+                continue
+        kept, unconfirmed = [], []
+        for r in seen or []:
+            away = self._away(r)
+            if away is None:
+                kept.append(r)
+                continue
+            oid, T, mesh = away
+            T2 = second.get(oid)
+            if T2 is not None and self._near(T, T2, mesh):
+                kept.append(r)
+            elif T2 is None:
+                unconfirmed.append(f"{oid} (not shown)")
+            else:
+                t, _ = se3.pose_error(T2, T, self._symmetries(mesh))
+                unconfirmed.append(f"{oid} ({1000 * t:.0f} mm from the first)")
+        return kept, unconfirmed
+
     def _differences(self, seen: list[dict]) -> list[str]:
         """What the observation shows otherwise than believed, beyond the scoring tolerance;
         the belief takes what was seen there. Unseen objects keep their believed pose, and so
         do objects seen where a grasp already found nothing."""
         off = []
         for r in seen or []:
-            try:
-                oid, T = str(r["id"]), se3.as_matrix(r["pose"])
-            except (KeyError, TypeError, ValueError):
-                continue
-            if not se3.is_rigid(T, tol=1e-3):
-                continue
-            mesh = self.meshes.get(oid) or str(r.get("mesh", ""))
+            away = self._away(r)
+            if away is None:
+                continue  # as believed, or seen where a grasp already found nothing
+            oid, T, mesh = away
             before = self.belief.get(oid)
             if before is None:
                 off.append(f"{oid} seen, not believed")
             else:
-                if self._near(T, before, mesh):
-                    continue
-                if any(self._near(T, bad, mesh) for bad in self._refuted.get(oid, [])):
-                    continue  # seen there before, and a grasp there found nothing
                 t, _ = se3.pose_error(T, before, self._symmetries(mesh))
                 off.append(f"{oid} is {1000 * t:.0f} mm from where it was believed")
                 earlier = self._looked.get(oid)

@@ -26,6 +26,7 @@ and the trial ends failed, saying so.
 
 from __future__ import annotations
 
+import functools
 import time
 import traceback
 import zlib
@@ -568,19 +569,29 @@ class _ClosedTrial:
         self.domain, self.instance, self.camera, self.protocol = domain, instance, camera, protocol
         self.executor, self.injector, self.deadline = executor, injector, deadline
         self.program_seconds = 0.0
+        self.look_seconds = 0.0  # second looks rendered inside the loop's report
 
-    def look(self, k: int) -> dict:
+    def look(self, k: int, again: bool = False) -> dict:
         """A new observation of the scene as it now is (the camera's physics renders the world;
-        the arm is parked out of view), with the trial's calibrated camera."""
+        the arm is parked out of view), with the trial's calibrated camera; `again`: a second
+        photo of the same scene (the sensor's noise drawn anew)."""
         scene = _final_scene(self.domain, self.instance, self.executor.model, self.executor.data)
         return observe(
             self.domain,
             scene,
             self.camera,
-            seed=_seed(self.instance.name, f"look-{k}"),
+            seed=_seed(self.instance.name, f"look-{k}" + ("-again" if again else "")),
             realism=self.protocol.realism,
             calibration_seed=_seed(self.instance.name, "camera"),
         )
+
+    def _look_again(self, k: int) -> dict:
+        """The second look `ClosedLoop.report` may ask for (its rendering is not program time)."""
+        t = time.perf_counter()
+        try:
+            return self.look(k, again=True)
+        finally:
+            self.look_seconds += time.perf_counter() - t
 
     def run(self, loop: ClosedLoop, start: Mapping, goal: Mapping, plan: Mapping):
         from sim.execution import StepFailure
@@ -621,13 +632,19 @@ class _ClosedTrial:
                         break
             k += 1
             seen = self.look(k)
-            t = time.perf_counter()
+            t, rendered = time.perf_counter(), self.look_seconds
             try:
-                step = loop.report(ok=ok, observation=seen, failure=why, missed=missed)
+                step = loop.report(
+                    ok=ok,
+                    observation=seen,
+                    failure=why,
+                    missed=missed,
+                    look_again=functools.partial(self._look_again, k),
+                )
             except Exception as e:
                 loop.give_up(f"a program failed: {type(e).__name__}: {clip(str(e))}")
                 step = None
-            self.program_seconds += time.perf_counter() - t
+            self.program_seconds += time.perf_counter() - t - (self.look_seconds - rendered)
         if loop.status == "done":
             last_failure = None
         return outcomes, last_failure, loop.to_dict()

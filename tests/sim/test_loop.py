@@ -183,6 +183,50 @@ def test_a_look_refuted_by_a_grasp_on_air_is_undone(cubes):
     assert loop.status == "done" and loop.replans == 2
 
 
+def test_a_second_look_that_puts_a_part_elsewhere_keeps_the_belief(cubes):
+    """A camera that reads a placed part 40 mm off on one look and 25 mm off the other way on
+    the next photo of the same scene (47 mm apart): neither is believed, nothing is replanned."""
+    programs = Scripted()
+    loop = ClosedLoop(cubes, programs)
+    a0, b0, a1, b1 = _at(0.5, 0.0), _at(0.5, 0.1), _at(0.4, 0.0), _at(0.4, 0.1)
+    loop.begin(_obs(a=a0, b=b0), _obs(a=a1, b=b1))
+    looks = []
+
+    def again():
+        looks.append(1)
+        return _obs(a=_at(0.4, -0.025), b=b0)
+
+    step = loop.report(ok=True, observation=_obs(a=_at(0.44, 0.0), b=b0), look_again=again)
+    assert looks == [1] and step["object"] == "b" and loop.replans == 0
+    assert np.allclose(loop.belief["a"], a1) and loop.observations == 2
+    assert "a second look did not confirm a (47 mm from the first)" in loop.events[-1].detail
+
+
+def test_a_second_look_that_shows_a_part_moved_again_is_believed(cubes):
+    programs = Scripted()
+    loop = ClosedLoop(cubes, programs)
+    a0, b0, a1, b1 = _at(0.5, 0.0), _at(0.5, 0.1), _at(0.4, 0.0), _at(0.4, 0.1)
+    loop.begin(_obs(a=a0, b=b0), _obs(a=a1, b=b1))
+    pushed = _at(0.43, 0.0)
+    step = loop.report(
+        ok=True, observation=_obs(a=pushed, b=b0), look_again=lambda: _obs(a=_at(0.432, 0.0))
+    )
+    assert step["object"] == "a" and loop.replans == 1  # put back first
+    assert np.allclose(loop.belief["a"], pushed)
+
+
+def test_a_scene_as_believed_takes_no_second_look(cubes):
+    loop = ClosedLoop(cubes, Scripted())
+    a0, a1, b0 = _at(0.5, 0.0), _at(0.4, 0.0), _at(0.5, 0.1)
+    loop.begin(_obs(a=a0, b=b0), _obs(a=a1, b=_at(0.4, 0.1)))
+
+    def again():
+        raise AssertionError("a second look was taken")
+
+    assert loop.report(ok=True, observation=_obs(a=a1, b=b0), look_again=again)["object"] == "b"
+    assert loop.observations == 1
+
+
 def test_a_grasp_on_air_where_no_look_moved_the_belief_is_a_plain_failure(cubes):
     programs = Scripted()
     loop = ClosedLoop(cubes, programs)
