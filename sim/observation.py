@@ -122,8 +122,8 @@ class Renderer:
             )
         self.model = model
         # The context's framebuffers sized to this renderer's images, not to the largest the
-        # model allows: the same pixels, and a multisampled 1920×1080 buffer would hold
-        # about 50 MB more of a CPU rasteriser's memory than a 1280×720 one.
+        # model allows: the same pixels, and a multisampled 1920×1080 buffer holds about
+        # 65 MB more of a CPU rasteriser's memory than a 1280×720 one.
         g = model.vis.global_
         saved = (g.offwidth, g.offheight)
         g.offwidth, g.offheight = width, height
