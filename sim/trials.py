@@ -803,8 +803,10 @@ class _Recorder:
         finally:
             q.offsamples = saved
         path.parent.mkdir(parents=True, exist_ok=True)
+        # H.264 in yuv420p needs even sizes only: a 960×540 camera's 480×270 frames are kept
+        # as they are, where a block size of 8 had them resized (and warned about) each trial
         self.writer: Any = imageio.get_writer(
-            path, fps=self.FPS, codec="libx264", quality=6, macro_block_size=8
+            path, fps=self.FPS, codec="libx264", quality=6, macro_block_size=2
         )
         self.last: np.ndarray | None = None
         self.log: list[dict] = []
