@@ -23,12 +23,16 @@ both targets are met in every domain, 1 otherwise, 2 for a broken catalogue.
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import statistics
 import sys
+import textwrap
 import time
+import tokenize
 import tomllib
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -78,13 +82,12 @@ def load_mutants(path: Path, references: dict[str, str]) -> list[Mutant]:
             raise CatalogueError(f"{m['name']}: unknown function {m['function']!r}")
         source = references[m["function"]]
         for k, (old, new) in enumerate(m["replace"]):
-            count = source.count(old)
-            if count != 1:
+            try:
+                source = replace_once(source, old, new, within=m.get("within"))
+            except CatalogueError as e:
                 raise CatalogueError(
-                    f"{m['name']}: replacement {k} matches {count} times in "
-                    f"{m['function']}.py (must be exactly once): {old[:80]!r}"
-                )
-            source = source.replace(old, new)
+                    f"{m['name']}: replacement {k} in {m['function']}.py: {e}"
+                ) from None
         if source == references[m["function"]]:
             raise CatalogueError(f"{m['name']}: the replacements change nothing")
         out.append(
@@ -97,6 +100,97 @@ def load_mutants(path: Path, references: dict[str, str]) -> list[Mutant]:
             )
         )
     return out
+
+
+_LAYOUT = {
+    tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT,
+    tokenize.ENCODING, tokenize.ENDMARKER,
+}  # fmt: skip
+
+
+def _code_tokens(text: str) -> list[tokenize.TokenInfo]:
+    """`text`'s tokens without comments, line breaks and indentation (a fragment — half a
+    call, a dict entry — is fine)."""
+    out = []
+    try:
+        for t in tokenize.generate_tokens(io.StringIO(textwrap.dedent(text)).readline):
+            if t.type not in _LAYOUT:
+                out.append(t)
+    except (tokenize.TokenError, IndentationError):
+        pass  # an unclosed bracket at the end of a fragment: the tokens before it stand
+    return out
+
+
+def _offsets(source: str) -> Callable[[tuple[int, int]], int]:
+    """Character offset in `source` of a tokenizer position (row from 1, column)."""
+    starts = [0]
+    for line in source.splitlines(keepends=True):
+        starts.append(starts[-1] + len(line))
+    return lambda at: starts[at[0] - 1] + at[1]
+
+
+def replace_once(source: str, old: str, new: str, *, within: str | None = None) -> str:
+    """`source` with `old` replaced by `new`, where `old` occurs exactly once.
+
+    `old` is matched as code, not as text: as its tokens, comments, line breaks and
+    indentation aside, so a re-wrapped line, a changed comment or an edit elsewhere in the
+    program leaves a mutant applying. `within` names a function (or `Class.method`) to look in
+    only. The text `old` spans in `source` is replaced; `new`'s lines after the first take the
+    indentation they have relative to `old`'s first line. Raises `CatalogueError` otherwise."""
+    lo, hi = 0, len(source)
+    if within is not None:
+        lo, hi = _function_span(source, within)
+    if within is None and source.count(old) == 1:
+        return source.replace(old, new)  # written as the program reads
+    if old.endswith("\n") and new.endswith("\n"):
+        new = new[:-1]  # the span replaced ends at `old`'s last token, before its line break
+    want = [(t.type, t.string) for t in _code_tokens(old)]
+    if not want:
+        raise CatalogueError("the old text has no code in it")
+    offset = _offsets(source)
+    tokens = [t for t in _code_tokens(source) if lo <= offset(t.start) and offset(t.end) <= hi]
+    have = [(t.type, t.string) for t in tokens]
+    starts = [i for i in range(len(have) - len(want) + 1) if have[i : i + len(want)] == want]
+    if len(starts) != 1:
+        where = f" in {within}" if within else ""
+        raise CatalogueError(
+            f"matches {len(starts)} times{where} (must be exactly once): {old[:80]!r}"
+        )
+    first, last = tokens[starts[0]], tokens[starts[0] + len(want) - 1]
+    begin, end = offset(first.start), offset(last.end)
+    line = first.line.splitlines()[0] if first.line else ""
+    indent = line[: len(line) - len(line.lstrip())]  # where `old` stands in `source`
+    written = old[: len(old) - len(old.lstrip(" "))]  # `old`'s own indentation
+    body = [
+        row[len(written) :] if row.startswith(written) else row
+        for row in new.lstrip(" ").split("\n")
+    ]
+    text = "\n".join([body[0], *(indent + row if row else row for row in body[1:])])
+    return source[:begin] + text + source[end:]
+
+
+def _function_span(source: str, name: str) -> tuple[int, int]:
+    """(start, end) character offsets of the function `name` (`f` or `Class.method`)."""
+    import ast
+
+    tree = ast.parse(source)
+    scope: list[ast.stmt] = tree.body
+    *outer, leaf = name.split(".")
+    for part in outer:
+        found = [n for n in scope if isinstance(n, ast.ClassDef) and n.name == part]
+        if not found:
+            raise CatalogueError(f"no class {part!r}")
+        scope = found[0].body
+    defs = [
+        n for n in scope if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef) and n.name == leaf
+    ]
+    if len(defs) != 1:
+        raise CatalogueError(f"{len(defs)} functions named {name!r}")
+    node = defs[0]
+    start = node.decorator_list[0].lineno if node.decorator_list else node.lineno
+    assert node.end_lineno is not None
+    offset = _offsets(source + "\n")
+    return offset((start, 0)), offset((node.end_lineno + 1, 0))
 
 
 def check(
