@@ -9,8 +9,9 @@ For each of the split's first N instances, the scenes after each step of its ref
 lands) are observed twice, with fresh sensor noise and the trial's realism and calibration,
 and read by `perceive` in a local sandbox session as a trial calls it; each reading is scored
 as `property.accuracy` scores it (`sim.score.state_accuracy`). Prints each misread scene —
-which look, the objects off and by how much — and the totals: looks wrong, and scenes read
-wrong by both looks (what `sim.loop.ClosedLoop`'s second look cannot dismiss).
+which look, the objects off and by how much ([mm, °]), whether the relations differ — and the
+totals: looks wrong, and scenes read wrong by both looks (what `sim.loop.ClosedLoop`'s second
+look cannot dismiss).
 
 The local backend isolates nothing: run it on programs you trust (the people-written ones).
 """
@@ -52,6 +53,7 @@ def misreads(
 ) -> tuple[list[dict], dict]:
     """(one row per look read wrong, totals) for `instances` seen through `camera`."""
     import domains
+    from benchmarks.perceive_draws import wrong_reading
     from checks.calls import session_modules
     from checks.context import DomainSpec
     from checks.inputs import records
@@ -96,18 +98,7 @@ def misreads(
                     if score.correct:
                         continue
                     wrong += 1
-                    rows.append(
-                        {
-                            **row,
-                            "missing": score.missing,
-                            "extra": score.extra,
-                            "off": {
-                                o.id: round(1000 * o.translation, 1)
-                                for o in score.objects
-                                if not o.within
-                            },
-                        }
-                    )
+                    rows.append({**row, **wrong_reading(score)})
                 totals["scenes"] += 1
                 totals["looks_wrong"] += wrong
                 totals["scenes_wrong_twice"] += wrong == LOOKS

@@ -25,6 +25,21 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 
+def wrong_reading(score) -> dict:
+    """What a reading `sim.score.state_accuracy` found wrong: the ids missing and extra, the
+    objects off ([mm, °]) and whether the relations differ."""
+    return {
+        "missing": score.missing,
+        "extra": score.extra,
+        "off": {
+            o.id: [round(1000 * o.translation, 1), round(float(np.degrees(o.rotation)), 1)]
+            for o in score.objects
+            if not o.within
+        },
+        "relations": bool(score.missing_edges or score.extra_edges),
+    }
+
+
 def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[int], progress):
     import domains
     from checks.budget import DEFAULT
@@ -68,22 +83,7 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
                 if score.correct:
                     continue
                 wrong += 1
-                rows.append(
-                    {
-                        **row,
-                        "missing": score.missing,
-                        "extra": score.extra,
-                        "off": {
-                            o.id: [
-                                round(1000 * o.translation, 1),
-                                round(float(np.degrees(o.rotation)), 1),
-                            ]
-                            for o in score.objects
-                            if not o.within
-                        },
-                        "relations": bool(score.missing_edges or score.extra_edges),
-                    }
-                )
+                rows.append({**row, **wrong_reading(score)})
             progress(
                 f"seed {seed}: {wrong} of {len(cases)} wrong "
                 f"({built:.0f} s to draw, {time.perf_counter() - t0 - built:.0f} s to perceive)"
