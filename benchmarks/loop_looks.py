@@ -28,7 +28,6 @@ from typing import Any
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
 LOOKS = 2
 
 
@@ -110,7 +109,7 @@ def misreads(
 
 def main(argv: list[str] | None = None) -> int:
     import domains
-    from contracts.functions import FUNCTIONS
+    from benchmarks.perceive_draws import program_sources
 
     p = argparse.ArgumentParser(prog="python -m benchmarks.loop_looks", description=__doc__)
     p.add_argument("--domain", required=True)
@@ -126,10 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     camera = args.camera
     if Path(camera).suffix == ".json":
         camera = json.loads(Path(camera).read_text())
-    folder = args.programs or REPO / "domains" / args.domain / "programs"
-    sources = {
-        f: (folder / f"{f}.py").read_text() for f in FUNCTIONS if (folder / f"{f}.py").is_file()
-    }
+    sources = program_sources(args.domain, args.programs)
     instances = dom.benchmark(args.split)[: args.trials]
     rows, totals = misreads(
         args.domain, sources, camera, instances, lambda line: print(line, file=sys.stderr)

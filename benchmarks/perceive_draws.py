@@ -91,19 +91,24 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
     return rows, total
 
 
-def main(argv: list[str] | None = None) -> int:
+def program_sources(domain: str, folder: Path | None = None) -> dict[str, str]:
+    """The programs of `folder` (default: the domain's people-written ones), by function."""
     from contracts.functions import FUNCTIONS
 
+    folder = folder or REPO / "domains" / domain / "programs"
+    return {
+        f: (folder / f"{f}.py").read_text() for f in FUNCTIONS if (folder / f"{f}.py").is_file()
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.perceive_draws", description=__doc__)
     p.add_argument("--domain", required=True)
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     p.add_argument("--programs", type=Path, help="default: domains/DOMAIN/programs")
     p.add_argument("--json", type=Path, help="write the wrong observations here")
     args = p.parse_args(argv)
-    folder = args.programs or REPO / "domains" / args.domain / "programs"
-    sources = {
-        f: (folder / f"{f}.py").read_text() for f in FUNCTIONS if (folder / f"{f}.py").is_file()
-    }
+    sources = program_sources(args.domain, args.programs)
     rows, total = wrong_observations(
         args.domain, sources, args.seeds, lambda line: print(line, file=sys.stderr, flush=True)
     )
