@@ -107,10 +107,10 @@ def _strip_visuals(spec: mujoco.MjSpec, prefix: str) -> None:
     """Remove the visual meshes of a menagerie spec, in place, keeping every body's inertia.
 
     A body whose inertia the compiler derives from its geoms (no explicit inertial) is given,
-    explicitly, the inertia it has with its visual geoms (`_geom_inertials`), so the physics
+    explicitly, the inertia it has with its visual geoms (`geom_inertials`), so the physics
     of the stripped robot is the full robot's to the last bit (a test steps both).
     """
-    inertials = _geom_inertials()
+    inertials = geom_inertials()
     for body in spec.bodies:
         if body.name != spec.worldbody.name and not body.explicitinertial:
             mass, ipos, iquat, inertia = inertials[prefix + body.name]
@@ -126,7 +126,7 @@ def _strip_visuals(spec: mujoco.MjSpec, prefix: str) -> None:
 
 
 @functools.cache
-def _geom_inertials() -> dict[str, tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
+def geom_inertials() -> dict[str, tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
     """(mass, ipos, iquat, inertia) of each robot body as the compiler derives them from the
     full model's geoms: compiled once per process, without filling MuJoCo's mesh cache (the
     robot's visual meshes would hold about 120 MB there)."""

@@ -709,7 +709,7 @@ def prepare(domain: Domain, *, record: bool = False) -> None:
     compile's transient peak (about 200 MB) then does not add to a trial's. Optional: a trial
     compiles what it lacks."""
     _return_large_blocks()
-    robot.build_robot_spec(visuals=False)
+    robot.geom_inertials()
     if record:
         _twin(domain, domain.object_ids)
 

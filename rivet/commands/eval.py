@@ -100,7 +100,7 @@ def _log_path(args: argparse.Namespace, domain: str, view: str) -> Path:
 def _check_robot_models() -> None:
     """The robot's models load (MENAGERIE_ROOT, the menagerie package): else every trial would
     fail the same way and be scored as a failed trial. Building the robot without its visual
-    meshes compiles the full robot once (`sim.robot._geom_inertials`), here, before any trial
+    meshes compiles the full robot once (`sim.robot.geom_inertials`), here, before any trial
     holds memory: the compile's transient peak does not add to a trial's."""
     from sim.errors import RobotModelError
     from sim.robot import build_robot_spec
