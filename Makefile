@@ -28,8 +28,8 @@ system: ## install and start the system pieces (Docker engine, EGL/Mesa) when mi
 	@bash scripts/bootstrap-system.sh
 
 TEST_WORKERS ?= auto
-test: venv system sandbox-image ## run the whole test suite (unit, property, sandbox, simulator) and the committed artifacts' property suites, on every core (TEST_WORKERS=auto)
-	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=10 tests --rivet-artifacts artifacts/
+test: venv system sandbox-image ## run the whole test suite (unit, property, sandbox, simulator, end to end) on every core (TEST_WORKERS=auto)
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=10 tests
 
 lint: venv ## ruff (lint + format check), mypy and the import layering (import-linter)
 	.venv/bin/ruff check .

@@ -10,6 +10,10 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 PROGRAMS = REPO / "domains" / "cubes" / "programs"
 CASES_SEED = 1  # the tests draw their check cases from one seed: the same cases every run
+# For tests of what one check finds, not of how many cases it takes: 12 observations, the first
+# three the hiding case as in the default budget (whose 45 the rejection arithmetic is about:
+# docs/checks.md).
+FEW = {"observations": 12, "hidden": 3}
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -36,12 +40,14 @@ def executor():
 
 @pytest.fixture(scope="session")
 def check(executor, tmp_path_factory):
-    """check(function, source, deps=None) -> report, through the local sandbox."""
+    """check(function, source, deps=None, few=False) -> report, through the local sandbox;
+    `few`: the default budget with `FEW` observations."""
     from checks import run_checks
+    from checks.budget import Budget
 
     out = tmp_path_factory.mktemp("check-images")
 
-    def run(function: str, source: str, deps: dict | None = None) -> dict:
+    def run(function: str, source: str, deps: dict | None = None, few: bool = False) -> dict:
         return run_checks(
             "cubes",
             function,
@@ -50,6 +56,7 @@ def check(executor, tmp_path_factory):
             executor=executor,
             out_dir=out,
             cases_seed=CASES_SEED,
+            budget=Budget(name="few", **FEW) if few else None,
         )
 
     return run

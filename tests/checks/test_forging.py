@@ -316,15 +316,16 @@ def test_a_perceive_session_can_reach_no_ground_truth(docker):
     `checks.run` sets it up, right after a session of the same warm container received the
     true records of every one of those scenes (as a `relate` check does), finds none of them —
     and does find a control pose planted where it can be reached."""
+    import checks.run
     import domains
     from checks.budget import DEFAULT
     from checks.calls import session_modules
     from checks.context import DomainSpec
-    from checks.inputs import build_cases
 
     dom = domains.load("cubes")
     spec = DomainSpec.of(dom)
-    cases = build_cases(dom, "perceive", DEFAULT, seed=11)
+    # the cases the perceive routes above were checked on, drawn as `checks.run` draws them
+    cases = checks.run.build_cases(dom, "perceive", DEFAULT, seed=CASES_SEED)
     observations = cases["observations"]
     truth = [np.asarray(r["pose"], float) for case in observations for r in case["truth"]]
     assert len(truth) >= 20
