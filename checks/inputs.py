@@ -68,26 +68,34 @@ def _rng(seed: int, *key: str) -> np.random.Generator:
 
 
 @lru_cache(maxsize=512)
-def _instance(domain_name: str, seed: int) -> domains.Instance | None:
+def _instance(domain_name: str, seed: int, ordered: bool = True) -> domains.Instance | None:
     """The generator's instance at `seed` with an order the robot can execute (every step has
-    a 2F-85 grasp): `plan`'s hand-aware checks hold a plan to that."""
+    a 2F-85 grasp): `plan`'s hand-aware checks hold a plan to that. `ordered=False`: its
+    start and goal only (no order is searched: most of a draw's time)."""
     try:
-        return domains.load(domain_name).generate(seed, grasps=True)
+        return domains.load(domain_name).generate(seed, grasps=True, ordered=ordered)
     except domains.GenerationError:
         return None
 
 
 def instances(
-    domain: Domain, rng: np.random.Generator, n: int, *, executable: bool = False
+    domain: Domain,
+    rng: np.random.Generator,
+    n: int,
+    *,
+    executable: bool = False,
+    scenes_only: bool = False,
 ) -> list[domains.Instance]:
     """`n` instances of the domain's generator at seeds drawn from `rng` (a seed the
     generator cannot serve is replaced by another draw). `executable`: also replace an
-    instance whose reference order the arm cannot carry out (`_executable`)."""
+    instance whose reference order the arm cannot carry out (`_executable`); `scenes_only`:
+    their start and goal scenes, with no order (what `perceive` is shown)."""
     out: list[domains.Instance] = []
     for _ in range(50 * max(n, 1)):
         if len(out) >= n:
             break
-        inst = _instance(domain.name, int(rng.integers(FRESH_FROM, SEED_SPACE)))
+        seed = int(rng.integers(FRESH_FROM, SEED_SPACE))
+        inst = _instance(domain.name, seed, not scenes_only)
         if inst is not None and (not executable or _executable(domain.name, inst)):
             out.append(inst)
     return out
@@ -305,7 +313,7 @@ def perceive_cases(domain: Domain, budget: Budget, seed: int) -> list[dict[str, 
                 unscored=(behind,),
             )
         )
-    pool = iter(instances(domain, rng, budget.observations))
+    pool = iter(instances(domain, rng, budget.observations, scenes_only=True))
     envelope = domain.camera_envelope
     while len(out) < budget.observations:
         drawn = composed_scene(domain, rng) if rng.random() < COMPOSED_SHARE else None

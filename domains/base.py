@@ -277,6 +277,7 @@ class Domain:
         physics: PhysicsCheck | None = None,
         grasps: bool | None = None,
         split: str = "dev",
+        ordered: bool = True,
     ) -> Instance:
         """A free draw: goal and start both from `seed`.
 
@@ -289,6 +290,8 @@ class Domain:
                 only (workspace, height, interpenetration).
             grasps: make the order executable by the robot (every step has a 2F-85 grasp,
                 `geometry.hand`); None: when `physics` is given.
+            ordered: False: no construction order (the instance's ``order`` is empty), for
+                callers that need only the two scenes; a start no order reaches is kept.
         """
         dev = check_split(split) == "dev"
         return draw_instance(
@@ -301,6 +304,7 @@ class Domain:
             physics=physics,
             grasps=physics is not None if grasps is None else grasps,
             split=split,
+            ordered=ordered,
         )
 
     def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:

@@ -91,9 +91,12 @@ def draw_instance(
     physics: PhysicsCheck | None,
     grasps: bool,
     split: str = "dev",
+    ordered: bool = True,
 ) -> Instance:
     """The first valid goal and start drawn from the keys, with their construction order
-    (`split`: which of the domain's goal and start families, "dev" or "test").
+    (`split`: which of the domain's goal and start families, "dev" or "test"; `ordered=False`:
+    the first valid start, with no order, for those who need only the scenes — a start the
+    order planner refuses is then kept).
 
     Raises:
         GenerationError: no valid goal or start within `ATTEMPTS` draws.
@@ -125,14 +128,16 @@ def draw_instance(
         if start_problems:
             problems.append(f"start draw {attempt}: {start_problems[0]}")
             continue
-        try:
-            order = planner.order(start, goal)
-        except GenerationError as e:
-            problems.append(f"start draw {attempt}: {e}")
-            continue
-        if not order:
-            problems.append(f"start draw {attempt}: start equals goal")
-            continue
+        order: Sequence[dict] = ()
+        if ordered:
+            try:
+                order = planner.order(start, goal)
+            except GenerationError as e:
+                problems.append(f"start draw {attempt}: {e}")
+                continue
+            if not order:
+                problems.append(f"start draw {attempt}: start equals goal")
+                continue
         return Instance(
             domain=domain.name,
             name=name,

@@ -187,3 +187,38 @@ def test_plan_cases_are_instances_the_checked_robot_can_carry_out():
     assert [c["start"][0]["pose"].tolist() for c in shown] == [
         records(i.start)[0]["pose"].tolist() for i in kept
     ]
+
+
+@pytest.mark.parametrize("name", domains.names())
+def test_perceive_scenes_are_drawn_without_searching_an_order(name, monkeypatch):
+    """`perceive` is shown scenes: its generated cases are the generator's starts and goals,
+    drawn with no construction order searched (the planners fail here if asked), valid scenes
+    all, and the same scenes an ordered draw gives wherever that draw's first start has an
+    order."""
+    from domains.generation import geometric_problems
+
+    dom = domains.load(name)
+    ordered = instances(dom, np.random.default_rng(6), 4)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a construction order was searched for perceive")
+
+    for planner in (dom.robot_reference_planner, dom.reference_planner):
+        monkeypatch.setattr(type(planner), "order", refuse)
+    drawn = instances(dom, np.random.default_rng(6), 4, scenes_only=True)
+    assert len(drawn) == 4
+    for inst in drawn:
+        assert inst.order == ()
+        for side in (inst.start, inst.goal):
+            assert geometric_problems(dom, side) == []
+    same = [
+        a.seed == b.seed
+        and all(
+            np.array_equal(x["pose"], y["pose"])
+            for x, y in zip(records(a.start), records(b.start), strict=True)
+        )
+        for a, b in zip(ordered, drawn, strict=True)
+    ]
+    assert same.count(True) >= 3, same
+    cases = build_cases(dom, "perceive", Budget(name="b", observations=4, hidden=1), seed=2)
+    assert len(cases["observations"]) == 4
