@@ -40,14 +40,21 @@ def executor():
 
 @pytest.fixture(scope="session")
 def check(executor, tmp_path_factory):
-    """check(function, source, deps=None, few=False) -> report, through the local sandbox;
-    `few`: the default budget with `FEW` observations."""
+    """check(function, source, deps=None, few=False, only=None) -> report, through the local
+    sandbox; `few`: the default budget with `FEW` observations; `only`: these checks alone
+    (`rivet check --only`)."""
     from checks import run_checks
     from checks.budget import Budget
 
     out = tmp_path_factory.mktemp("check-images")
 
-    def run(function: str, source: str, deps: dict | None = None, few: bool = False) -> dict:
+    def run(
+        function: str,
+        source: str,
+        deps: dict | None = None,
+        few: bool = False,
+        only: list[str] | None = None,
+    ) -> dict:
         return run_checks(
             "cubes",
             function,
@@ -57,6 +64,7 @@ def check(executor, tmp_path_factory):
             out_dir=out,
             cases_seed=CASES_SEED,
             budget=Budget(name="few", **FEW) if few else None,
+            only=only,
         )
 
     return run
