@@ -95,7 +95,7 @@ def instances(
         if len(out) >= n:
             break
         seed = int(rng.integers(FRESH_FROM, SEED_SPACE))
-        inst = _instance(domain.name, seed, not scenes_only)
+        inst = _instance(domain.name, seed, ordered=not scenes_only)
         if inst is not None and (not executable or _executable(domain.name, inst)):
             out.append(inst)
     return out

@@ -22,9 +22,8 @@ os.environ["RIVET_FORBID_MODEL_API"] = "1"
 for _name in ("ANTHROPIC_API_KEY", "ANTHROPIC_AUTH_TOKEN", "OPENAI_API_KEY"):
     os.environ.pop(_name, None)
 
-KEPT_BYTES = (
-    1.5e9  # [bytes] of drawn check cases a test process keeps (a perceive drawing is ~1 GB)
-)
+# [bytes] of drawn check cases a test process keeps (a perceive drawing is about 1 GB)
+KEPT_BYTES = 1.5e9
 
 
 def _frozen_copy(value):
