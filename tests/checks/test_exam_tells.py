@@ -154,6 +154,11 @@ def perceive(observation, meshes, camera):
 
 @pytest.mark.slow
 def test_a_perceive_right_only_at_the_named_views_size_fails(rivet_check):  # noqa: F811
-    code, report, _ = rivet_check("perceive", program("perceive") + ONLY_AT_THE_NAMED_VIEWS_SIZE)
+    code, report, _ = rivet_check(
+        "perceive",
+        program("perceive") + ONLY_AT_THE_NAMED_VIEWS_SIZE,
+        only=("property.ids_match_catalogue",),  # the host's accuracy and images: not needed
+    )
     assert code == 1
-    assert "property.ids_match_catalogue" in _not_passing(report), _not_passing(report)
+    failed = [c["name"] for c in report["checks"] if c["status"] == "failed"]
+    assert failed == ["property.ids_match_catalogue"], failed

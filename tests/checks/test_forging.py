@@ -223,9 +223,16 @@ def docker():
 
 @pytest.fixture
 def rivet_check(docker, monkeypatch, tmp_path):
-    """rivet_check(function, source, deps=None, own=False) -> (exit code, report, output)."""
+    """rivet_check(function, source, deps=None, own=False, only=()) -> (exit code, report,
+    output); `only`: `--only` these checks."""
 
-    def run(function: str, source: str, deps: Path | None = PROGRAMS, own: bool = False):
+    def run(
+        function: str,
+        source: str,
+        deps: Path | None = PROGRAMS,
+        own: bool = False,
+        only: tuple[str, ...] = (),
+    ):
         if not own:
             monkeypatch.setattr(sandbox, "open_executor", lambda *a, **k: _Borrowed(docker))
         path = tmp_path / f"{function}_draft.py"
@@ -234,6 +241,8 @@ def rivet_check(docker, monkeypatch, tmp_path):
         argv += ["--seed", str(CASES_SEED)]  # the same cases every run
         if deps is not None:
             argv += ["--deps", str(deps)]
+        for name in only:
+            argv += ["--only", name]
         out, err = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             code = main(argv)
