@@ -23,6 +23,7 @@ both targets are met in every domain, 1 otherwise, 2 for a broken catalogue.
 from __future__ import annotations
 
 import argparse
+import ast
 import io
 import json
 import statistics
@@ -171,8 +172,6 @@ def replace_once(source: str, old: str, new: str, *, within: str | None = None) 
 
 def _function_span(source: str, name: str) -> tuple[int, int]:
     """(start, end) character offsets of the function `name` (`f` or `Class.method`)."""
-    import ast
-
     tree = ast.parse(source)
     scope: list[ast.stmt] = tree.body
     *outer, leaf = name.split(".")
