@@ -31,6 +31,7 @@ from agent.extract import (
 from agent.journal import Journal
 from agent.prompt import DomainContext, Feedback, build_request
 from agent.report import report_image
+from artifacts import provenance
 from checks.inputs import case_seed, fresh_seed
 from checks.report import sanitise_text
 from contracts.functions import authoring_order
@@ -145,7 +146,7 @@ class AuthoringRun:
                     "max_attempts": self.max_attempts,
                     "cases_seed": self.cases_seed,
                     "author": _author_of(self.client),
-                    "commit": _commit(),
+                    "commit": provenance.commit(),
                 },
             )
         record = getattr(self.client, "record_cases_seed", None)
@@ -392,23 +393,6 @@ def _author_of(client: object) -> dict | None:
     """Who answers this run's calls (provider and model, an agent, or people), as journaled."""
     author = getattr(client, "author", None)
     return author.to_dict() if author is not None else None
-
-
-def _commit() -> str | None:
-    """The repository's commit the run ran on (None outside a git checkout)."""
-    import subprocess
-
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short=12", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            cwd=Path(__file__).resolve().parent,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None if out.returncode == 0 else None
 
 
 def _gate_images(outcome: GateOutcome, run_dir: Path, limit: int = 4) -> tuple[ImageBlock, ...]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from contracts.errors import UsageError
@@ -24,6 +25,7 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
     from dataclasses import asdict
 
     import domains
+    from artifacts.provenance import run_record
     from experiments.evaluation import EvalConfig, TrialLog, progress_bar, run_eval, table
     from sim.faults import parse_faults
 
@@ -65,6 +67,7 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
     if not args.quiet:
         kept = f": {log.earlier()} of {len(instances)} trials kept" if args.resume else ""
         print(f"trial log {path}{kept}", file=sys.stderr)
+    started = time.perf_counter()
     try:
         summary = run_eval(
             config,
@@ -80,9 +83,11 @@ def _eval_one(domain_name: str, args: argparse.Namespace, view: str, camera: obj
             file=sys.stderr,
         )
         raise
+    wall = time.perf_counter() - started
     print(table(summary))
     if set_hash is not None:
         summary["set_hash"] = set_hash  # which programs ran
+    summary["run"] = {**run_record(getattr(args, "argv", None)), "wall_s": round(wall, 1)}
     return summary
 
 

@@ -5,6 +5,7 @@ artifacts that produced it); the options' validation, signals and `--resume`."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -15,7 +16,7 @@ REPO = Path(__file__).resolve().parents[2]
 RIVET = str(Path(sys.executable).parent / "rivet")
 
 
-def test_every_view_summary_names_the_evaluated_set(tmp_path):
+def test_every_view_summary_names_the_evaluated_set_and_the_run(tmp_path):
     out = tmp_path / "eval.json"
     proc = subprocess.run(
         [
@@ -45,6 +46,13 @@ def test_every_view_summary_names_the_evaluated_set(tmp_path):
     for view, summary in summaries.items():
         assert summary["view"] == view and summary["trials"] == 1
         assert summary["set_hash"] == manifest["set_hash"]
+        run = summary["run"]  # what produced it: docs/results.md cites these
+        assert run["command"] == (
+            f"rivet eval cubes --policy artifacts --trials 1 --view all --fit --quiet --json {out}"
+        )
+        assert re.fullmatch(r"[0-9a-f]{12}", run["commit"]) and isinstance(run["dirty"], bool)
+        assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", run["date"])
+        assert run["wall_s"] > 0
         (trial,) = summary["per_trial"]  # --fit: how well each perceived state explains its image
         assert sorted(trial["fit"]) == ["goal", "start"] and trial["fit"]["start"]["ok"], trial
 
