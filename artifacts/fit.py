@@ -21,7 +21,7 @@ with the observed depth:
 A state fits when every object keeps `SUPPORT_MIN` and `RESIDUAL_MAX_M` and at most
 `UNEXPLAINED_MAX` of the foreground is unexplained; `SceneFit.problems` says what does not, worst
 first. The bounds sit well outside what the frozen programs produce on the dev split's
-observations (docs/results.md, "rivet solve's fit"), so that a refusal means the images are
+observations (docs/api.md, "Images the set does not explain"), so that a refusal means the images are
 not of the domain, or the programs are lost on them — not a few millimetres of error.
 
 Design rule: numpy and OpenCV only, like the rest of the thin runtime (no simulator in `rivet

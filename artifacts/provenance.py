@@ -32,8 +32,10 @@ def commit() -> str | None:
 
 
 def dirty() -> bool | None:
-    """Whether a tracked file differs from the commit (None outside a git checkout)."""
-    out = _git("status", "--porcelain", "--untracked-files=no")
+    """Whether a tracked file differs from the commit (None outside a git checkout), results
+    aside: `rivet eval`'s dev runs rewrite artifacts/<d>/eval.json, which no run reads."""
+    out = _git("status", "--porcelain", "--untracked-files=no", "--", ".",
+               ":(exclude,glob)artifacts/*/eval.json")  # fmt: skip
     return None if out is None else bool(out.strip())
 
 

@@ -309,7 +309,7 @@ def _gate(args, domain: str):
 
     Default: `GATE_TRIALS` trials for a model or an agent; none for a replay, which
     reproduces the recorded run, and the reference transcripts were packed without a gate
-    (their sets' gate figures are in docs/results.md)."""
+    (their sets' gate figures: docs/checks.md, "Measured on the reference programs")."""
     trials = args.gate_trials
     if trials is None:
         trials = 0 if not (args.model or args.agent) else GATE_TRIALS

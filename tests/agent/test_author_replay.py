@@ -55,7 +55,7 @@ def test_replayed_authoring_reproduces_the_committed_artifacts(tmp_path, domain)
             str(tmp_path / "art"),
             "--gate-trials",
             # the gate in the real command path, one trial (the reference sets fail some of
-            # their gate draws' trials: docs/results.md, "The trial gate on the reference sets")
+            # their gate draws' trials: docs/checks.md, "Measured on the reference programs")
             "1",
         ],
         capture_output=True,
