@@ -10,7 +10,7 @@ export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 export MENAGERIE_ROOT ?= $(abspath ../shared/menagerie)
 
-.PHONY: help venv system test lint author eval bench bench-checks sandbox-base sandbox-image format refreeze refreeze-check
+.PHONY: help venv system test lint author eval bench bench-checks sandbox-base sandbox-image format refreeze refreeze-check results results-runs
 
 help: ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN{FS=":.*## "}{printf "  make %-14s %s\n", $$1, $$2}'
@@ -49,6 +49,13 @@ refreeze: venv system sandbox-image ## rebuild the transcripts and frozen sets f
 
 refreeze-check: venv ## exit 1 where a committed transcript or frozen set is not what its programs make
 	.venv/bin/rivet refreeze --check
+
+results: venv ## write docs/results.md from the run files in docs/results/
+	$(PY) -m experiments.results render
+
+results-runs: venv system sandbox-image ## run the commands whose docs/results/ files are missing (hours), then render
+	$(PY) -m experiments.results run
+	$(PY) -m experiments.results render
 
 POLICY ?= artifacts
 WORKERS ?= 2

@@ -1,0 +1,81 @@
+"""docs/results.md is generated: the committed page is what the committed run files render, each
+run file is the output of the command the page lists for it, and every rate carries its
+interval."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from experiments import results
+from experiments.evaluation import wilson
+
+
+def _files() -> dict[str, dict]:
+    return {p.stem: json.loads(p.read_text()) for p in sorted(results.RUN_FILES.glob("*.json"))}
+
+
+def test_the_committed_page_is_what_the_run_files_render():
+    assert results.PAGE.read_text() == results.render(), (
+        "docs/results.md is not what docs/results/ renders: run `make results`"
+    )
+
+
+def test_the_page_is_a_reference_of_at_most_300_lines_with_an_interval_on_every_rate():
+    page = results.render()
+    assert len(page.splitlines()) <= 300
+    bare = [line for line in page.splitlines() for _ in re.finditer(r"\d+\.\d %(?! \(\d)", line)]
+    assert not bare, f"a rate without its interval: {bare[:3]}"
+    assert not re.search(r"(first|second|third|[0-9]+th) session", page, re.IGNORECASE)
+
+
+def test_every_run_file_is_a_listed_command_and_its_rates_are_its_trials():
+    runs = {r.key: r for r in results.runs()}
+    for key, run in _files().items():
+        assert key in runs, f"docs/results/{key}.json is no command of the page"
+        assert run["run"]["command"] == runs[key].command, key
+        assert re.fullmatch(r"[0-9a-f]{12}", run["run"]["commit"]), key
+        trials = run["per_trial"]
+        assert run["trials"] == len(trials) > 0, key
+        for rate, verdict in (("state_ac", "state_ok"), ("plan_sr", "plan_ok"),
+                              ("final_sr", "final_ok")):  # fmt: skip
+            k = sum(t[verdict] for t in trials)
+            assert run[rate] == pytest.approx(k / len(trials)), (key, rate)
+            assert run["intervals"][rate] == pytest.approx(list(wilson(k, len(trials)))), key
+        assert all(t["final_ok"] for t in trials if "failure" not in t), key  # failures named
+
+
+def test_a_run_file_keeps_each_trials_verdict_and_refuses_an_unattributed_summary():
+    summary = {
+        "domain": "cubes",
+        "trials": 1,
+        "state_ac": 0.0,
+        "plan_sr": 0.0,
+        "final_sr": 0.0,
+        "intervals": {k: [0.0, 0.79] for k in ("state_ac", "plan_sr", "final_sr")},
+        "per_trial": [
+            {
+                "name": "test/goal01_start1",
+                "state_ok": False,
+                "plan_ok": False,
+                "final_ok": False,
+                "failure": {"stage": "perception", "reason": "x" * 500},
+                "timings": {"total": 3.14159},
+                "steps": [{"large": "detail"}],
+            }
+        ],
+    }
+    with pytest.raises(ValueError, match="names no command"):
+        results.compact(summary)
+    kept = results.compact({**summary, "run": {"command": "rivet eval cubes"}})
+    (trial,) = kept["per_trial"]
+    assert trial["failure"]["stage"] == "perception" and trial["wall_s"] == 3.14
+    assert len(trial["failure"]["reason"]) == results.REASON_CHARS + 1  # the cut is marked: …
+    assert "steps" not in trial
+
+
+def test_an_unknown_run_is_refused_naming_the_known_ones(capsys):
+    assert results.main(["run", "cubes-nowhere"]) == 2
+    assert "unknown run cubes-nowhere" in capsys.readouterr().err
