@@ -84,6 +84,10 @@ def runs(names: Iterable[str] | None = None) -> list[Run]:
             out.append(
                 Run(f"{d}-test-{f}-open", (d, *art, *fault, "--trials", "5", "--workers", "2"))
             )
+    for d in names:
+        for c in ENVELOPE:
+            camera = ("--camera", f"docs/cameras/{c}.json")
+            out.append(Run(f"{d}-test-{c}-closed", (d, *art, *test, *camera, *closed, *first20)))
     return out
 
 
@@ -160,18 +164,21 @@ def _stages(run: Mapping | None) -> str:
     return ", ".join(f"{s} {n}" for s, n in counts.most_common()) or "none"
 
 
-def _failing(named: Sequence[tuple[str, Mapping | None]]) -> list[str]:
-    """The failing trials of each named run, grouped by run: a table, or a line saying none."""
+def _failing(named: Sequence[tuple[str, Mapping | None]], limit: int = 8) -> list[str]:
+    """The failing trials of each named run (the first `limit` of each; the run file has the
+    rest), grouped by run: a table, or a line saying none."""
     rows: list[str] = []
     for label, run in named:
         failed = [t for t in (run or {}).get("per_trial", []) if "failure" in t]
         if failed:
-            rows.append(f"| **{label}** | | | |")
+            rows.append(f"| **{label}** ({len(failed)}) | | | |")
         rows += [
             f"| `{t['name']}` | {t['failure']['stage']} | {'yes' if t['final_ok'] else 'no'} | "
             f"{t['failure']['reason'].replace('|', '∣')} |"
-            for t in failed
+            for t in failed[:limit]
         ]
+        if len(failed) > limit:
+            rows.append(f"| … {len(failed) - limit} more in the run file | | | |")
     if not rows:
         return ["No trial failed in these runs."]
     return ["| trial | stage | final | reason |", "|---|---|---|---|", *rows]
@@ -247,12 +254,16 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
         out.append(f"| {d} | {cells} | {_paper(d, VIEWS)} |")
     out += [
         "",
-        "| domain | " + " | ".join(ENVELOPE) + " |",
-        "|---|" + "---|" * len(ENVELOPE),
+        "Through the envelope cameras, open loop and closed loop (`--loop closed`, run files",
+        "`D-test-CAMERA-closed`):",
+        "",
+        "| domain | loop | " + " | ".join(ENVELOPE) + " |",
+        "|---|---|" + "---|" * len(ENVELOPE),
     ]
     for d in names:
-        out.append(f"| {d} | " + " | ".join(rate(got[f"{d}-test-{c}"], "final_sr")
-                                           for c in ENVELOPE) + " |")  # fmt: skip
+        for loop, suffix in (("open", ""), ("closed", "-closed")):
+            cells = " | ".join(rate(got[f"{d}-test-{c}{suffix}"], "final_sr") for c in ENVELOPE)
+            out.append(f"| {d} | {loop} | {cells} |")
     out += [
         "",
         "Failures by stage:",
