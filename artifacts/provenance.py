@@ -39,12 +39,12 @@ def dirty() -> bool | None:
     return None if out is None else bool(out.strip())
 
 
-def run_record(argv: Sequence[str] | None = None, *, program: str = "rivet") -> dict:
+def run_record(argv: Sequence[str] | None = None, *, program: Sequence[str] = ("rivet",)) -> dict:
     """What produced a result: the command line (`program` and its arguments), the commit, whether
     the checkout differed from it, the UTC date and the machine's CPU count."""
     args = list(sys.argv[1:] if argv is None else argv)
     return {
-        "command": shlex.join([program, *args]),
+        "command": shlex.join([*program, *args]),
         "commit": commit(),
         "dirty": dirty(),
         "date": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import domains
+from artifacts.provenance import run_record
 from contracts.functions import FUNCTIONS
 
 REPO = Path(__file__).resolve().parent.parent
@@ -235,6 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", type=Path, default=REPO / "runs" / "bench-checks")
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # for each summary's "run"
 
     import sandbox
 
@@ -369,6 +371,7 @@ def bench_domain(
         "seconds_per_check_max": round(max(times), 1) if times else None,
         "wall_s": round(time.perf_counter() - t_start, 1),
         "sandbox": args.sandbox,
+        "run": run_record(args.argv, program=("python", "-m", "benchmarks.checks_bench")),
     }
     (out / "bench_checks.json").write_text(
         json.dumps({"summary": summary, "correct": correct_rows, "mutants": mutant_rows}, indent=1)

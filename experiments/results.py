@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import domains
-from experiments.evaluation import PAPER
+from experiments.evaluation import PAPER, wilson
 from sim.faults import FAULTS
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,23 +37,42 @@ PAGE = REPO / "docs" / "results.md"
 ENVELOPE = tuple(f"envelope-{n}" for n in range(1, 6))  # docs/cameras/envelope-N.json
 VIEWS = ("view1", "view2")
 REASON_CHARS = 160  # a failure's reason, kept to this length in a run file
+Files = Mapping[str, dict | None]  # run files by key; None where a run has not been made
+
+
+CHECKS_BENCH = ("python", "-m", "benchmarks.checks_bench")
 
 
 @dataclass(frozen=True)
 class Run:
-    """One command of the page: `rivet eval` with `args`; its output is docs/results/KEY.json."""
+    """One command of the page, kept as docs/results/KEY.json: `rivet eval` with `args`, or
+    (`tool="checks"`) the checks' mutation benchmark with `args`."""
 
     key: str
     args: tuple[str, ...]
+    tool: str = "eval"
+
+    @property
+    def program(self) -> tuple[str, ...]:
+        return ("rivet",) if self.tool == "eval" else CHECKS_BENCH
 
     @property
     def argv(self) -> list[str]:
-        """The command's arguments after `rivet` (the full JSON goes under runs/results/)."""
-        return ["eval", *self.args, "--quiet", "--json", f"runs/results/{self.key}.json"]
+        """The command's arguments after its program (the full output goes under runs/results/)."""
+        if self.tool == "eval":
+            return ["eval", *self.args, "--quiet", "--json", str(self.output)]
+        return [*self.args, "--out", str(self.output.parent)]
+
+    @property
+    def output(self) -> Path:
+        """The command's own output, relative to the repository."""
+        if self.tool == "eval":
+            return Path("runs/results") / f"{self.key}.json"
+        return Path("runs/results") / self.key / "bench_checks.json"
 
     @property
     def command(self) -> str:
-        return shlex.join(["rivet", *self.argv])
+        return shlex.join([*self.program, *self.argv])
 
 
 def runs(names: Iterable[str] | None = None) -> list[Run]:
@@ -88,14 +107,33 @@ def runs(names: Iterable[str] | None = None) -> list[Run]:
         for c in ENVELOPE:
             camera = ("--camera", f"docs/cameras/{c}.json")
             out.append(Run(f"{d}-test-{c}-closed", (d, *art, *test, *camera, *closed, *first20)))
+    for d in names:
+        out.append(Run(f"checks-{d}", ("--domain", d, "--repeats", "10"), tool="checks"))
     return out
 
 
 # -- run files ----------------------------------------------------------------------------------
 
-_SUMMARY_KEYS = ("domain", "trials", "state_ac", "plan_sr", "final_sr", "intervals",
-                 "final_with_failed_plan", "view", "split", "policy", "protocol", "loop",
-                 "faults", "failures", "timing", "precision", "set_hash", "run")  # fmt: skip
+_SUMMARY_KEYS = (
+    "domain",
+    "trials",
+    "state_ac",
+    "plan_sr",
+    "final_sr",
+    "intervals",
+    "final_with_failed_plan",
+    "view",
+    "split",
+    "policy",
+    "protocol",
+    "loop",
+    "faults",
+    "failures",
+    "timing",
+    "precision",
+    "set_hash",
+    "run",
+)
 
 
 def compact(summary: Mapping) -> dict:
@@ -119,11 +157,29 @@ def compact(summary: Mapping) -> dict:
                 k: t["loop"][k] for k in ("status", "reason", "replans") if k in t["loop"]
             }
         if t.get("fault"):
-            row["fault"] = {k: t["fault"][k] for k in ("name", "step", "happened", "detail")
-                            if k in t["fault"]}  # fmt: skip
+            row["fault"] = {
+                k: t["fault"][k] for k in ("name", "step", "happened", "detail") if k in t["fault"]
+            }
         trials.append(row)
     out["per_trial"] = trials
     return out
+
+
+def compact_checks(bench: Mapping) -> dict:
+    """A checks benchmark's `bench_checks.json` of one domain, each row cut to its verdict."""
+    if "summary" not in bench or "run" not in bench["summary"]:
+        raise ValueError("not one domain's bench_checks.json naming its command (an older run)")
+    return {
+        "summary": dict(bench["summary"]),
+        "correct": [
+            {k: r[k] for k in ("function", "runs", "rejections", "identical_reports")}
+            for r in bench["correct"]
+        ],
+        "mutants": [
+            {k: r[k] for k in ("mutant", "function", "caught", "first_failure", "seconds")}
+            for r in bench["mutants"]
+        ],
+    }
 
 
 def load(key: str, folder: Path = RUN_FILES) -> dict | None:
@@ -131,10 +187,12 @@ def load(key: str, folder: Path = RUN_FILES) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
-def write(key: str, summary: Mapping, folder: Path = RUN_FILES) -> Path:
+def write(key: str, output: Mapping, folder: Path = RUN_FILES) -> Path:
+    """Keep a command's output (an eval summary, or a checks benchmark's) as KEY.json."""
+    kept = compact_checks(output) if key.startswith("checks-") else compact(output)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{key}.json"
-    path.write_text(json.dumps(compact(summary), indent=1, ensure_ascii=False) + "\n")
+    path.write_text(json.dumps(kept, indent=1, ensure_ascii=False) + "\n")
     return path
 
 
@@ -164,7 +222,7 @@ def _stages(run: Mapping | None) -> str:
     return ", ".join(f"{s} {n}" for s, n in counts.most_common()) or "none"
 
 
-def _failing(named: Sequence[tuple[str, Mapping | None]], limit: int = 8) -> list[str]:
+def _failing(named: Sequence[tuple[str, Mapping | None]], limit: int = 6) -> list[str]:
     """The failing trials of each named run (the first `limit` of each; the run file has the
     rest), grouped by run: a table, or a line saying none."""
     rows: list[str] = []
@@ -184,24 +242,29 @@ def _failing(named: Sequence[tuple[str, Mapping | None]], limit: int = 8) -> lis
     return ["| trial | stage | final | reason |", "|---|---|---|---|", *rows]
 
 
+def _meta(found: Mapping) -> Mapping:
+    """A run file's provenance (`artifacts.provenance.run_record`) with its wall time."""
+    if "run" in found:
+        return found["run"]
+    return {**found["summary"]["run"], "wall_s": found["summary"]["wall_s"]}
+
+
 def _minutes(run: Mapping | None) -> str:
-    return "–" if run is None else f"{run['run']['wall_s'] / 60:.1f} min"
+    return "–" if run is None else f"{_meta(run)['wall_s'] / 60:.1f} min"
 
 
-def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
-    """The page, from the run files in `folder`."""
-    names = list(domains.names() if names is None else names)
-    all_runs = runs(names)
-    got = {r.key: load(r.key, folder) for r in all_runs}
-    out: list[str] = [
+def _intro() -> list[str]:
+    """The page's head: where its figures come from, and what they measure."""
+    return [
         "# Results",
         "",
         "<!-- Generated by `make results` (python -m experiments.results render) from the run",
         "     files in docs/results/. Do not edit: change experiments/results.py or re-run. -->",
         "",
         "Every figure on this page is read from a committed run file, docs/results/KEY.json, the",
-        "summary of one `rivet eval` command; the table at the end gives each run's command,",
-        "date, commit and wall time. A rate is followed by its Wilson 95 % interval.",
+        "summary of one listed command (`rivet eval`, or the checks' benchmark); the table at the",
+        "end gives each run's command, date, commit and wall time. A rate is followed by its",
+        "Wilson 95 % interval.",
         "`python -m experiments.results run KEY` runs a command again and `make results`",
         "rewrites this page.",
         "",
@@ -214,6 +277,12 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
         "executor that acts on the perceived start and its own plan targets, sensing the world only",
         "through its gripper and a wrist-camera in-hand estimate (docs/executor.md). Machine: the",
         "run table's CPU count, no GPU, Mesa llvmpipe, MuJoCo at 2 ms.",
+    ]
+
+
+def _table_i(got: Files, names: Sequence[str]) -> list[str]:
+    """Table I: the front camera, dev and test."""
+    out: list[str] = [
         "",
         "## Table I — front camera",
         "",
@@ -236,7 +305,12 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
         "",
         *_failing([(f"{d} {sp}", got[f"{d}-{sp}-front"]) for d in names for sp in ("dev", "test")]),
     ]
-    out += [
+    return out
+
+
+def _table_iii(got: Files, names: Sequence[str]) -> list[str]:
+    """Final success by camera: the named views and the envelope cameras."""
+    out: list[str] = [
         "",
         "## Table III — final success by camera (test split)",
         "",
@@ -272,9 +346,17 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
         "|---|" + "---|" * (len(VIEWS) + len(ENVELOPE)),
     ]
     for d in names:
-        out.append(f"| {d} | " + " | ".join(_stages(got[f"{d}-test-{c}"])
-                                           for c in (*VIEWS, *ENVELOPE)) + " |")  # fmt: skip
-    out += [
+        out.append(
+            f"| {d} | "
+            + " | ".join(_stages(got[f"{d}-test-{c}"]) for c in (*VIEWS, *ENVELOPE))
+            + " |"
+        )
+    return out
+
+
+def _executor_alone(got: Files, names: Sequence[str]) -> list[str]:
+    """The oracle policy: execution alone."""
+    out: list[str] = [
         "",
         "## The executor alone (test split)",
         "",
@@ -296,9 +378,16 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
             if p["median_position_error_mm"] is None
             else f"{p['median_position_error_mm']:.2f} mm, {p['median_yaw_error_deg']:.2f}°"
         )
-        out.append(f"| {d} | {run['trials']} | {rate(run, 'plan_sr')} | {rate(run, 'final_sr')}"
-                   f" | {placed} | {_stages(run)} |")  # fmt: skip
-    out += [
+        out.append(
+            f"| {d} | {run['trials']} | {rate(run, 'plan_sr')} | {rate(run, 'final_sr')}"
+            f" | {placed} | {_stages(run)} |"
+        )
+    return out
+
+
+def _closed_loop(got: Files, names: Sequence[str]) -> list[str]:
+    """The closed loop against the open one, without faults."""
+    out: list[str] = [
         "",
         "## Closed loop (test split, front camera, no faults)",
         "",
@@ -316,9 +405,18 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
             "–" if r is None else f"{r['timing']['median_trial_wall_s']:.1f} s" for r in (o, c)
         )
         out.append(f"| {d} | {rate(o, 'final_sr')} | {rate(c, 'final_sr')} | {walls} |")
-    out += ["", "Failing closed-loop trials:", "",
-            *_failing([(d, got[f"{d}-test-front-closed"]) for d in names])]  # fmt: skip
     out += [
+        "",
+        "Failing closed-loop trials:",
+        "",
+        *_failing([(d, got[f"{d}-test-front-closed"]) for d in names]),
+    ]
+    return out
+
+
+def _faults(got: Files, names: Sequence[str]) -> list[str]:
+    """Recovery per injected fault."""
+    out: list[str] = [
         "",
         "## Faults (test split, front camera)",
         "",
@@ -353,7 +451,12 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
                 f"| {d} | {f} | {opened} | {row['happened']}/{row['drawn']} | {row['recovered']}"
                 f" | {row['gave_up']} | {row['wrong']} | {interval} |"
             )
-    out += [
+    return out
+
+
+def _timings(got: Files, names: Sequence[str]) -> list[str]:
+    """Table I's runs: latency, the programs' CPU, wall times."""
+    out: list[str] = [
         "",
         "## Timings (front camera, `--workers 2`)",
         "",
@@ -376,7 +479,47 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
                 f"{1000 * t['median_policy_cpu_s']:.0f} ms | {t['median_trial_wall_s']:.1f} s | "
                 f"{_minutes(run)} |"
             )
-    out += [
+    return out
+
+
+def _checks_benchmark(got: Files, names: Sequence[str]) -> list[str]:
+    """The checks' mutation benchmark."""
+    out: list[str] = [
+        "",
+        "## The checks' mutation benchmark",
+        "",
+        "Each reference program checked 10 times on one fresh draw (none may be rejected, the",
+        "reports must be identical) and each mutant of the domain's catalogue, a realistic bug",
+        'planted in a reference program, checked once on fresh draws (docs/checks.md, "Mutation',
+        'benchmark"). Run files `checks-D`.',
+        "",
+        "| domain | mutants rejected | correct programs rejected | identical reports |"
+        " one check, median / max | missed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for d in names:
+        bench = got[f"checks-{d}"]
+        if bench is None:
+            out.append(f"| {d} | not run | | | | |")
+            continue
+        b = bench["summary"]
+        low, high = wilson(b["caught"], b["mutants"]) or (0.0, 1.0)
+        rejected = (
+            f"{b['caught']}/{b['mutants']}: {100 * b['caught_rate']:.1f} % "
+            f"({100 * low:.1f}–{100 * high:.1f})"
+        )
+        missed = ", ".join(f"`{m['mutant']}`" for m in bench["mutants"] if not m["caught"])
+        out.append(
+            f"| {d} | {rejected} | {b['false_rejections']} of {b['correct_runs']} runs | "
+            f"{'yes' if b['all_reports_identical'] else 'no'} | {b['seconds_per_check_median']} / "
+            f"{b['seconds_per_check_max']} s | {missed or 'none'} |"
+        )
+    return out
+
+
+def _runs_table(got: Files, all_runs: Sequence[Run]) -> list[str]:
+    """Every run: command, date, commit, set, wall time."""
+    out: list[str] = [
         "",
         "## Runs",
         "",
@@ -393,14 +536,19 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
         if found is None:
             out.append(f"| {spec.key} | `{spec.command}` | not run | | | |")
             continue
-        meta = found["run"]
+        meta = _meta(found)
         commit = (meta.get("commit") or "?") + ("+" if meta.get("dirty") else "")
         set_hash = (found.get("set_hash") or "")[:8] or "–"
         out.append(
             f"| {spec.key} | `{meta['command']}` | {meta['date'][:16].replace('T', ' ')} | "
             f"{commit} | {set_hash} | {_minutes(found)} |"
         )
-    out += [
+    return out
+
+
+def _caveats() -> list[str]:
+    """What the figures do not say."""
+    return [
         "",
         "## Caveats",
         "",
@@ -412,11 +560,31 @@ def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
         "- The rows of 20 trials are the first 20 of the test split; their intervals are wide.",
         "- The wrist-camera in-hand estimate is a noise model on the true pose (0.3 mm, 0.3°), a",
         "  stand-in for an image pipeline.",
-        "- Other measurements live with what they measure: the check benchmark and the perceive",
-        "  draws in docs/checks.md, the sandbox's overheads in docs/sandbox.md, faults and their",
-        "  recovery in docs/executor.md; each names its command.",
+        "- Other measurements live with what they measure: the perceive draws and the check and",
+        "  gate times in docs/checks.md, the sandbox's overheads in docs/sandbox.md, the executor's",
+        "  own sweeps and a trial worker's memory in docs/executor.md; each names its command.",
         "",
     ]
+
+
+def render(folder: Path = RUN_FILES, names: Sequence[str] | None = None) -> str:
+    """The page, from the run files in `folder`."""
+    names = list(domains.names() if names is None else names)
+    all_runs = runs(names)
+    got = {r.key: load(r.key, folder) for r in all_runs}
+    sections = (
+        _table_i,
+        _table_iii,
+        _executor_alone,
+        _closed_loop,
+        _faults,
+        _timings,
+        _checks_benchmark,
+    )
+    out = _intro()
+    for section in sections:
+        out += section(got, names)
+    out += _runs_table(got, all_runs) + _caveats()
     return "\n".join(out)
 
 
@@ -431,12 +599,17 @@ def _run(keys: Sequence[str]) -> int:
         print(f"unknown run {', '.join(unknown)}; known: {', '.join(known)}", file=sys.stderr)
         return 2
     todo = [known[k] for k in keys] if keys else [r for r in known.values() if load(r.key) is None]
-    rivet = str(Path(sys.executable).parent / "rivet")
+    this_venv = {  # the programs of this interpreter's environment
+        "eval": [str(Path(sys.executable).parent / "rivet")],
+        "checks": [sys.executable, *CHECKS_BENCH[1:]],
+    }
     for k, r in enumerate(todo, 1):
         print(f"[{k}/{len(todo)}] {r.command}", file=sys.stderr, flush=True)
-        full = REPO / "runs" / "results" / f"{r.key}.json"
+        full = REPO / r.output
         full.unlink(missing_ok=True)
-        proc = subprocess.run([rivet, *r.argv], cwd=REPO, env=os.environ.copy(), check=False)
+        proc = subprocess.run(
+            [*this_venv[r.tool], *r.argv], cwd=REPO, env=os.environ.copy(), check=False
+        )
         if not full.is_file():
             print(f"{r.key}: no summary written (exit {proc.returncode})", file=sys.stderr)
             return 1
@@ -447,8 +620,11 @@ def _run(keys: Sequence[str]) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.results", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser = argparse.ArgumentParser(
+        prog="python -m experiments.results",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     sub = parser.add_subparsers(dest="what", required=True)
     p_run = sub.add_parser("run", help="run the commands whose run files are missing, or KEYs")
     p_run.add_argument("keys", nargs="*", metavar="KEY")
@@ -474,8 +650,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.check:
         same = PAGE.is_file() and PAGE.read_text() == page
         if not same:
-            print(f"{PAGE.relative_to(REPO)} is not what docs/results/ renders: make results",
-                  file=sys.stderr)  # fmt: skip
+            print(
+                f"{PAGE.relative_to(REPO)} is not what docs/results/ renders: make results",
+                file=sys.stderr,
+            )
         return 0 if same else 1
     PAGE.write_text(page)
     print(PAGE.relative_to(REPO))

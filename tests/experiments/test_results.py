@@ -35,12 +35,20 @@ def test_every_run_file_is_a_listed_command_and_its_rates_are_its_trials():
     runs = {r.key: r for r in results.runs()}
     for key, run in _files().items():
         assert key in runs, f"docs/results/{key}.json is no command of the page"
+        if runs[key].tool == "checks":
+            summary = run["summary"]
+            assert summary["run"]["command"] == runs[key].command, key
+            assert summary["caught"] == sum(m["caught"] for m in run["mutants"]), key
+            continue
         assert run["run"]["command"] == runs[key].command, key
         assert re.fullmatch(r"[0-9a-f]{12}", run["run"]["commit"]), key
         trials = run["per_trial"]
         assert run["trials"] == len(trials) > 0, key
-        for rate, verdict in (("state_ac", "state_ok"), ("plan_sr", "plan_ok"),
-                              ("final_sr", "final_ok")):  # fmt: skip
+        for rate, verdict in (
+            ("state_ac", "state_ok"),
+            ("plan_sr", "plan_ok"),
+            ("final_sr", "final_ok"),
+        ):
             k = sum(t[verdict] for t in trials)
             assert run[rate] == pytest.approx(k / len(trials)), (key, rate)
             assert run["intervals"][rate] == pytest.approx(list(wilson(k, len(trials)))), key
@@ -79,3 +87,59 @@ def test_a_run_file_keeps_each_trials_verdict_and_refuses_an_unattributed_summar
 def test_an_unknown_run_is_refused_naming_the_known_ones(capsys):
     assert results.main(["run", "cubes-nowhere"]) == 2
     assert "unknown run cubes-nowhere" in capsys.readouterr().err
+
+
+def test_a_checks_benchmark_is_kept_and_shown_with_its_interval_and_missed_mutants(tmp_path):
+    run = {
+        "command": "python -m benchmarks.checks_bench --domain cubes --repeats 10 --out "
+        "runs/results/checks-cubes",
+        "commit": "0123456789ab",
+        "dirty": False,
+        "date": "2026-12-06T12:00:00Z",
+        "cpus": 2,
+    }
+    bench = {
+        "summary": {
+            "domain": "cubes",
+            "mutants": 3,
+            "caught": 2,
+            "caught_rate": 0.6667,
+            "correct_runs": 40,
+            "false_rejections": 0,
+            "all_reports_identical": True,
+            "seconds_per_check_median": 4.0,
+            "seconds_per_check_max": 17.5,
+            "wall_s": 600.0,
+            "run": run,
+        },
+        "correct": [
+            {
+                "function": "plan",
+                "runs": 10,
+                "rejections": 0,
+                "identical_reports": True,
+                "rejected_by": [],
+                "cases_seed": 1,
+            }
+        ],
+        "mutants": [
+            {
+                "mutant": m,
+                "function": "plan",
+                "caught": c,
+                "first_failure": None,
+                "seconds": 1.0,
+                "failing": [],
+                "bug": "b",
+            }
+            for m, c in (("a", True), ("b", True), ("plan_missed", False))
+        ],
+    }
+    results.write("checks-cubes", bench, tmp_path)
+    kept = json.loads((tmp_path / "checks-cubes.json").read_text())
+    assert "bug" not in kept["mutants"][0] and kept["summary"]["run"] == run
+    page = results.render(tmp_path, names=["cubes"])
+    (row,) = [line for line in page.splitlines() if line.startswith("| cubes | 2/3")]
+    assert "66.7 % (20.8–93.9)" in row and "`plan_missed`" in row and "0 of 40 runs" in row
+    assert "| checks-cubes | `python -m benchmarks.checks_bench --domain cubes" in page
+    assert "| 2026-12-06 12:00 | 0123456789ab | – | 10.0 min |" in page
