@@ -249,6 +249,14 @@ def _meta(found: Mapping) -> Mapping:
     return {**found["summary"]["run"], "wall_s": found["summary"]["wall_s"]}
 
 
+def _committed_set(domain: str) -> str | None:
+    """The set hash of the domain's committed frozen set (artifacts/<domain>/manifest.json)."""
+    from artifacts.store import ROOT
+
+    path = ROOT / domain / "manifest.json"
+    return json.loads(path.read_text())["set_hash"] if path.is_file() else None
+
+
 def _minutes(run: Mapping | None) -> str:
     return "–" if run is None else f"{_meta(run)['wall_s'] / 60:.1f} min"
 
@@ -524,9 +532,10 @@ def _runs_table(got: Files, all_runs: Sequence[Run]) -> list[str]:
         "## Runs",
         "",
         "Each run's command (run from the repository root), the UTC date it finished, the commit",
-        'it ran on ("+" where tracked files differed from it), the evaluated set and the run\'s',
-        "wall time, on a 2-core machine that other work may have shared: compare wall times",
-        "within a run, not across runs.",
+        'it ran on ("+" where tracked files differed from it), the evaluated set (marked where',
+        "it is not the set committed in artifacts/ now: such a run is to be made again) and the",
+        "run's wall time, on a 2-core machine that other work may have shared: compare wall",
+        "times within a run, not across runs.",
         "",
         "| run file | command | date | commit | set | wall |",
         "|---|---|---|---|---|---|",
@@ -539,6 +548,8 @@ def _runs_table(got: Files, all_runs: Sequence[Run]) -> list[str]:
         meta = _meta(found)
         commit = (meta.get("commit") or "?") + ("+" if meta.get("dirty") else "")
         set_hash = (found.get("set_hash") or "")[:8] or "–"
+        if found.get("set_hash") and found["set_hash"] != _committed_set(found["domain"]):
+            set_hash += " (not the committed set)"
         out.append(
             f"| {spec.key} | `{meta['command']}` | {meta['date'][:16].replace('T', ' ')} | "
             f"{commit} | {set_hash} | {_minutes(found)} |"

@@ -143,3 +143,18 @@ def test_a_checks_benchmark_is_kept_and_shown_with_its_interval_and_missed_mutan
     assert "66.7 % (20.8–93.9)" in row and "`plan_missed`" in row and "0 of 40 runs" in row
     assert "| checks-cubes | `python -m benchmarks.checks_bench --domain cubes" in page
     assert "| 2026-12-06 12:00 | 0123456789ab | – | 10.0 min |" in page
+
+
+def test_a_run_of_a_set_that_is_no_longer_committed_is_marked(tmp_path):
+    kept = json.loads((results.RUN_FILES / "cubes-dev-front.json").read_text())
+    (tmp_path / "cubes-dev-front.json").write_text(json.dumps(kept))
+    page = results.render(tmp_path, names=["cubes"])
+    assert "(not the committed set)" not in page
+    kept["set_hash"] = "0" * 64  # a set re-frozen since the run
+    (tmp_path / "cubes-dev-front.json").write_text(json.dumps(kept))
+    (row,) = [
+        ln
+        for ln in results.render(tmp_path, names=["cubes"]).splitlines()
+        if ln.startswith("| cubes-dev-front |")
+    ]
+    assert "00000000 (not the committed set)" in row
