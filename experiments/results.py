@@ -417,7 +417,7 @@ def _closed_loop(got: Files, names: Sequence[str]) -> list[str]:
         "",
         "Failing closed-loop trials:",
         "",
-        *_failing([(d, got[f"{d}-test-front-closed"]) for d in names]),
+        *_failing([(d, got[f"{d}-test-front-closed"]) for d in names], limit=4),
     ]
     return out
 
