@@ -614,6 +614,7 @@ def _run(keys: Sequence[str]) -> int:
         "eval": [str(Path(sys.executable).parent / "rivet")],
         "checks": [sys.executable, *CHECKS_BENCH[1:]],
     }
+    failed: list[str] = []
     for k, r in enumerate(todo, 1):
         print(f"[{k}/{len(todo)}] {r.command}", file=sys.stderr, flush=True)
         full = REPO / r.output
@@ -621,13 +622,24 @@ def _run(keys: Sequence[str]) -> int:
         proc = subprocess.run(
             [*this_venv[r.tool], *r.argv], cwd=REPO, env=os.environ.copy(), check=False
         )
-        if not full.is_file():
+        if proc.returncode in (130, 143):  # interrupted or terminated: stop here
+            print(
+                f"{r.key}: stopped (exit {proc.returncode}); the runs before it are kept",
+                file=sys.stderr,
+            )
+            return proc.returncode
+        if not full.is_file():  # a run that fails goes on to the next (hours of them)
             print(f"{r.key}: no summary written (exit {proc.returncode})", file=sys.stderr)
-            return 1
+            failed.append(r.key)
+            continue
+        kept = write(r.key, json.loads(full.read_text()))
+        print(f"  → {kept.relative_to(REPO)}", file=sys.stderr)
+    if failed:
         print(
-            f"  → {write(r.key, json.loads(full.read_text())).relative_to(REPO)}", file=sys.stderr
+            f"{len(failed)} of {len(todo)} runs wrote no summary: {', '.join(failed)}",
+            file=sys.stderr,
         )
-    return 0
+    return 1 if failed else 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -158,3 +158,13 @@ def test_a_run_of_a_set_that_is_no_longer_committed_is_marked(tmp_path):
         if ln.startswith("| cubes-dev-front |")
     ]
     assert "00000000 (not the committed set)" in row
+
+
+def test_a_run_that_writes_no_summary_is_named_and_the_others_still_run(monkeypatch, capsys):
+    bad = [results.Run("x-1", ("no-such-domain",)), results.Run("x-2", ("no-such-domain-2",))]
+    monkeypatch.setattr(results, "runs", lambda names=None: bad)
+    assert results.main(["run"]) == 1  # the real `rivet eval`, refusing each domain (exit 2)
+    err = capsys.readouterr().err
+    assert "[2/2] rivet eval no-such-domain-2" in err
+    assert "2 of 2 runs wrote no summary: x-1, x-2" in err
+    assert not (results.RUN_FILES / "x-1.json").exists()
