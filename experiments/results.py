@@ -272,9 +272,8 @@ def _intro() -> list[str]:
         "Every figure on this page is read from a committed run file, docs/results/KEY.json, the",
         "summary of one listed command (`rivet eval`, or the checks' benchmark); the table at the",
         "end gives each run's command, date, commit and wall time. A rate is followed by its",
-        "Wilson 95 % interval.",
-        "`python -m experiments.results run KEY` runs a command again and `make results`",
-        "rewrites this page.",
+        "Wilson 95 % interval. `python -m experiments.results run KEY` runs a command again and",
+        "`make results` rewrites this page.",
         "",
         "The programs behind `--policy artifacts` are the people-written reference programs",
         "(labelled so in their transcripts and manifests), frozen from `domains/<d>/programs/`; no",
@@ -283,8 +282,9 @@ def _intro() -> list[str]:
         '(docs/domains.md, "Splits"). Trials run under the honest protocol: realistic images and a',
         "calibration error (docs/observations.md), the programs in the Docker sandbox, and an",
         "executor that acts on the perceived start and its own plan targets, sensing the world only",
-        "through its gripper and a wrist-camera in-hand estimate (docs/executor.md). Machine: the",
-        "run table's CPU count, no GPU, Mesa llvmpipe, MuJoCo at 2 ms.",
+        "through its gripper and a wrist-camera in-hand estimate (docs/executor.md). The machine:",
+        "the CPU cores each run records (`cpus` in its file), no GPU, Mesa llvmpipe for rendering,",
+        "MuJoCo physics at 2 ms.",
     ]
 
 
