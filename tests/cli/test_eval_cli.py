@@ -228,11 +228,16 @@ def test_an_interrupted_evaluation_keeps_its_trials_and_resume_runs_only_the_res
 
     out = tmp_path / "oracle.json"
     log = tmp_path / "oracle.cubes.front.trials.jsonl"
-    # five trials: the signal comes after the first is logged, with room to spare on a busy
-    # machine before the last would end
-    argv = [RIVET, "eval", "cubes", "--policy", "oracle", "--trials", "5", "--json", str(out)]
+    argv = [RIVET, "eval", "cubes", "--policy", "oracle", "--trials", "3", "--json", str(out)]
     proc = subprocess.Popen(
-        [*argv, "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO
+        [*argv, "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+        # Ctrl-C's default, as in a terminal: a suite started as a background job (`make test &`
+        # in a script) passes SIGINT on ignored, and a Python started so ignores it too
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     lines: list[str] = []
     while proc.poll() is None and len(lines) < 2:  # the header and one finished trial
@@ -243,16 +248,16 @@ def test_an_interrupted_evaluation_keeps_its_trials_and_resume_runs_only_the_res
     assert proc.returncode == 130, err[-2000:]
     assert f"the finished trials are kept in {log}" in err and "Traceback" not in err
     kept = [json.loads(line) for line in log.read_text().splitlines()]
-    assert kept[0]["evaluation"]["trials"][:1] == ["goal01_start1"] and 2 <= len(kept) <= 5
+    assert kept[0]["evaluation"]["trials"][:1] == ["goal01_start1"] and len(kept) in (2, 3)
     assert not out.exists()
 
     again = subprocess.run([*argv, "--resume"], capture_output=True, text=True, cwd=REPO)
     assert again.returncode in (0, 1), again.stderr[-2000:]
-    assert f"{len(kept) - 1} of 5 trials kept" in again.stderr
+    assert f"{len(kept) - 1} of 3 trials kept" in again.stderr
     summary = json.loads(out.read_text())
     assert [t["name"] for t in summary["per_trial"]] == kept[0]["evaluation"]["trials"]
     assert summary["per_trial"][0] == kept[1]  # kept, not run again
-    assert len(log.read_text().splitlines()) == 6  # header + 5 trials, none twice
+    assert len(log.read_text().splitlines()) == 4  # header + 3 trials, none twice
 
     other = subprocess.run(  # a log of another evaluation is refused, not mixed in
         [*argv, "--resume", "--loop", "open", "--faults", "push"],
