@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import domains
+from artifacts.store import ROOT as ARTIFACTS
 from experiments.evaluation import PAPER, wilson
 from sim.faults import FAULTS
 
@@ -189,7 +190,7 @@ def load(key: str, folder: Path = RUN_FILES) -> dict | None:
 
 def write(key: str, output: Mapping, folder: Path = RUN_FILES) -> Path:
     """Keep a command's output (an eval summary, or a checks benchmark's) as KEY.json."""
-    kept = compact_checks(output) if key.startswith("checks-") else compact(output)
+    kept = compact_checks(output) if "mutants" in output else compact(output)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{key}.json"
     path.write_text(json.dumps(kept, indent=1, ensure_ascii=False) + "\n")
@@ -251,9 +252,7 @@ def _meta(found: Mapping) -> Mapping:
 
 def _committed_set(domain: str) -> str | None:
     """The set hash of the domain's committed frozen set (artifacts/<domain>/manifest.json)."""
-    from artifacts.store import ROOT
-
-    path = ROOT / domain / "manifest.json"
+    path = ARTIFACTS / domain / "manifest.json"
     return json.loads(path.read_text())["set_hash"] if path.is_file() else None
 
 
