@@ -297,26 +297,33 @@ def summarise(config: EvalConfig, per_trial: list[dict]) -> dict:
 
 def fault_table(per_trial: list[dict]) -> dict[str, dict]:
     """Per fault: trials it happened in, and how they ended — recovered (final success), gave
-    up (the closed loop stopped, saying why) or wrong (ended otherwise off the goal)."""
+    up (the closed loop stopped, saying why) or wrong (ended otherwise off the goal). Apart:
+    `toppled`, the trials not recovered in which the fault left a part on another face
+    (`sim.faults`: no transfer from above can right it), and the recovery rate of the rest
+    (`recoverable_interval`)."""
     out: dict[str, dict] = {}
     for t in per_trial:
         f = t.get("fault")
         if not f:
             continue
         row = out.setdefault(f["name"], {"drawn": 0, "happened": 0, "recovered": 0, "gave_up": 0,
-                                         "wrong": 0})  # fmt: skip
+                                         "wrong": 0, "toppled": 0})  # fmt: skip
         row["drawn"] += 1
         if not f.get("happened"):
             continue
         row["happened"] += 1
         if t["final_ok"]:
             row["recovered"] += 1
-        elif (t.get("loop") or {}).get("status") == "gave_up":
+            continue
+        if (t.get("loop") or {}).get("status") == "gave_up":
             row["gave_up"] += 1
         else:
             row["wrong"] += 1
+        if f.get("toppled"):
+            row["toppled"] += 1
     for row in out.values():
         row["interval"] = wilson(row["recovered"], row["happened"])
+        row["recoverable_interval"] = wilson(row["recovered"], row["happened"] - row["toppled"])
     return out
 
 
@@ -369,11 +376,14 @@ def table(summary: dict) -> str:
             f"median yaw error {p['median_yaw_error_deg']:.2f}° over {p['placements']} placements"
         )
     if summary.get("faults"):
-        lines.append(f"  {'fault':<6} {'happened':>8} {'recovered':>9} {'gave up':>7} {'wrong':>5}")
+        lines.append(
+            f"  {'fault':<6} {'happened':>8} {'recovered':>9} {'gave up':>7} {'wrong':>5} "
+            f"{'toppled':>7}"
+        )
         for name, row in summary["faults"].items():
             lines.append(
                 f"  {name:<6} {row['happened']:>4}/{row['drawn']:<3} {row['recovered']:>9} "
-                f"{row['gave_up']:>7} {row['wrong']:>5}"
+                f"{row['gave_up']:>7} {row['wrong']:>5} {row.get('toppled', 0):>7}"
             )
     failed = [tr for tr in summary["per_trial"] if tr["failure"]]
     if failed:

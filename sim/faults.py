@@ -20,7 +20,12 @@ plan's length):
 - ``skip``:  the robot silently skips the k-th transfer (it reports it done).
 
 `Fault.record` says what happened and when (the sim time, the step, the object, the
-displacement); a fault whose moment never came (the trial ended first) says so.
+displacement); a fault whose moment never came (the trial ended first) says so. A fault that
+moves parts (slip, push, move) also says, once they have come to rest (`SETTLE_S` later, or
+when the trial ends), which parts it left on another face than they rested on before
+(`toppled`): a pillar on its side, a roof fallen off its beam. That is the world's truth, for
+scoring only — a hand that picks from above and turns parts only about the vertical cannot
+right them, so the recovery table counts those trials apart (`experiments.evaluation`).
 """
 
 from __future__ import annotations
@@ -43,6 +48,9 @@ BIAS_M = 0.015  # [m] the start-pose perception bias
 PUSH_M = (0.020, 0.040)  # [m] how far a placed part is pushed
 MOVE_M = (0.060, 0.120)  # [m] how far a person moves a part
 _PENETRATION_M = 0.0005  # a displaced part may touch, not overlap, another [m]
+SETTLE_S = 1.5  # [s] of sim time after a fault before its parts are judged at rest
+TOPPLE_RAD = np.radians(30.0)  # a part whose up axis turned more than this (modulo its
+# symmetries) rests on another face
 
 
 def parse_faults(text: str | None) -> tuple[str, ...]:
@@ -136,13 +144,21 @@ class Injector:
         self.fault = fault
         self.model, self.data = model, data
         self.meshes = {k: (v[0] if isinstance(v, tuple) else v) for k, v in meshes.items()}
+        self.symmetries = {
+            k: [np.asarray(S, float)[:3, :3] for S in v[1]] if isinstance(v, tuple) else []
+            for k, v in meshes.items()
+        }
         self.transfers = 0  # transfers begun (or skipped)
         self.grip_override: float | None = None
+        self._upright: dict[str, np.ndarray] | None = None  # each part's rotation before
 
     # -- the executor's hook -------------------------------------------------------------------
 
     def on_phase(self, executor: Any, phase: str, oid: str) -> None:
         f = self.fault
+        settled = f is not None and self.data.time >= f.record.get("sim_time", 0.0) + SETTLE_S
+        if self._upright is not None and settled:
+            self.settle()
         if phase == "grasp":
             self.transfers += 1
             executor.grip_override = None
@@ -179,6 +195,34 @@ class Injector:
         self.fault.record = {"happened": True, "sim_time": 0.0,
                              "detail": "the robot skipped the transfer and reported it done"}  # fmt: skip
 
+    def settle(self) -> None:
+        """Judge, once, which parts the fault left resting on another face (`toppled` in the
+        record): called `SETTLE_S` after the fault and when the trial ends."""
+        f, before = self.fault, self._upright
+        if f is None or before is None:
+            return
+        self._upright = None
+        now = self._rotations()
+        z = np.array([0.0, 0.0, 1.0])
+        toppled = []
+        for oid, R0 in before.items():
+            ups = [R0 @ S @ z for S in self.symmetries.get(oid) or [np.eye(3)]]
+            up_now = now[oid] @ z
+            if min(np.arccos(np.clip(u @ up_now, -1.0, 1.0)) for u in ups) > TOPPLE_RAD:
+                toppled.append(oid)
+        f.record["toppled"] = toppled
+        if toppled:
+            f.record["detail"] = (
+                f"{f.record.get('detail', '')}; left {', '.join(toppled)} on another face"
+            )
+
+    def _rotations(self) -> dict[str, np.ndarray]:
+        out = {}
+        for oid in self.meshes:
+            body = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, body_name(oid))
+            out[oid] = self.data.xmat[body].reshape(3, 3).copy()
+        return out
+
     # -- displacing a part --------------------------------------------------------------------
 
     def _free_parts(self) -> list[str]:
@@ -205,6 +249,7 @@ class Injector:
         adr = int(m.jnt_qposadr[m.body_jntadr[body]])
         dof = int(m.jnt_dofadr[m.body_jntadr[body]])
         q0 = d.qpos[adr : adr + 7].copy()
+        before = self._rotations()
         rng = _rng(f.trial, what)
         vertices = np.asarray(self.meshes[oid].vertices)
         for _ in range(48):
@@ -237,6 +282,7 @@ class Injector:
                     "detail": f"{oid} {what} {1000 * float(np.linalg.norm(moved[:2])):.0f} mm",
                     "shift_m": moved.round(4).tolist(),
                 }
+                self._upright = before
                 return
         d.qpos[adr : adr + 7] = q0
         mujoco.mj_forward(m, d)

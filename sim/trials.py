@@ -472,6 +472,7 @@ def run_trial(
                 if f.kind == "deadline"
                 else f"step {f.step} ({f.object}, {f.phase}): {f.kind}: {clip(f.reason)}",
             )
+        injector.settle()  # a fault's topples, judged now if its moment came late
         final = _final_scene(domain, instance, model, data)
         score = final_success(
             domain,

@@ -48,3 +48,28 @@ def test_the_summary_and_the_table_carry_the_intervals():
     assert summary["intervals"]["final_sr"] == pytest.approx(wilson(9, 10))
     text = table(summary)
     assert "95 % interval" in text and "59.6–98.2%" in text, text
+
+
+def test_the_fault_table_counts_toppled_parts_apart():
+    """A trial not recovered whose fault left a part on another face is counted as toppled, in
+    its gave-up or wrong column as well; the recoverable rate leaves those out."""
+
+    def faulted(ok: bool, status: str | None, toppled: list[str], happened: bool = True) -> dict:
+        t = {**_trial(ok), "fault": {"name": "push", "happened": happened, "toppled": toppled}}
+        return {**t, "loop": None if status is None else {"status": status}}
+
+    from experiments.evaluation import fault_table
+
+    rows = fault_table([
+        faulted(True, "done", []),
+        faulted(True, "done", ["roof"]),  # tipped, and still the goal: recovered
+        faulted(False, "gave_up", ["roof"]),
+        faulted(False, "done", ["cylinder"]),
+        faulted(False, "gave_up", []),
+        faulted(False, None, [], happened=False),
+    ])  # fmt: skip
+    row = rows["push"]
+    assert {
+        k: row[k] for k in ("drawn", "happened", "recovered", "gave_up", "wrong", "toppled")
+    } == {"drawn": 6, "happened": 5, "recovered": 2, "gave_up": 2, "wrong": 1, "toppled": 2}
+    assert row["interval"] == wilson(2, 5) and row["recoverable_interval"] == wilson(2, 3)

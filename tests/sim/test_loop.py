@@ -338,3 +338,52 @@ def test_the_closed_loop_needs_programs(cubes_trial):
     domain, instance = cubes_trial
     with pytest.raises(UsageError, match="the closed loop needs a policy with programs"):
         run_trial(domain, instance, OraclePolicy(), loop="closed")
+
+
+def test_a_fault_that_tips_a_part_onto_another_face_says_so():
+    """The injector judges, from the world's truth, which parts a fault left on another face:
+    turned about the vertical or flipped onto a face its symmetry makes the same, a part is not
+    toppled; on its side it is."""
+    import mujoco
+
+    from sim.faults import Injector
+    from sim.scene import body_name
+    from sim.trials import _world
+
+    domain = domains.load("assembly")
+    instance = domain.benchmark_instance(1, 1, physics=physical_problems)
+    model, data = _world(domain, instance)
+    meshes = {
+        o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
+        for o in instance.start["objects"]
+    }
+    kinds = {o["id"]: o["mesh"] for o in instance.start["objects"]}
+    pillar = next(i for i, m in kinds.items() if m.startswith("pillar"))
+    roof = next(i for i, m in kinds.items() if m == "roof")
+
+    def turned(oid: str, axis: tuple[float, float, float], angle: float) -> None:
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name(oid))
+        adr = int(model.jnt_qposadr[model.body_jntadr[body]])
+        q = np.zeros(4)
+        mujoco.mju_axisAngle2Quat(q, np.asarray(axis, float), angle)
+        out = np.zeros(4)
+        mujoco.mju_mulQuat(out, q, data.qpos[adr + 3 : adr + 7].copy())
+        data.qpos[adr + 3 : adr + 7] = out
+        mujoco.mj_forward(model, data)
+
+    def judged(*turns) -> list[str]:
+        mujoco.mj_resetData(model, data)
+        mujoco.mj_forward(model, data)
+        injector = Injector(Fault(name="push", step=0, trial="t"), model, data, meshes)
+        injector.fault.record = {"happened": True, "sim_time": 0.0, "detail": "pushed"}
+        injector._upright = injector._rotations()
+        for t in turns:
+            turned(*t)
+        injector.settle()
+        return injector.fault.record["toppled"]
+
+    assert judged() == []
+    assert judged((pillar, (0, 0, 1), 1.0), (roof, (0, 0, 1), -2.0)) == []  # about the vertical
+    assert judged((pillar, (1, 0, 0), np.pi)) == []  # upside down: the same square pillar
+    assert judged((pillar, (1, 0, 0), np.pi / 2)) == [pillar]
+    assert judged((roof, (0, 1, 0), np.pi)) == [roof]  # a roof on its ridge is not on its base
