@@ -67,6 +67,13 @@ class ProgramPolicy:
             timings["fit"] = time.perf_counter() - t
         return PolicyOutput(plan=plan, start_state=start, goal_state=goal, timings=timings, fit=fit)
 
+    def look_problems(self, domain: Any, observation: dict, records: list[dict]) -> list[str]:
+        """What `artifacts.fit` finds wrong with `records` as an explanation of `observation`
+        (the closed loop's judge, `sim.loop`): [] when they fit, or when the fit cannot be
+        judged (no refusal on a failing `render`)."""
+        fit = _fit(domain, observation, {"objects": records}, self.runner())
+        return list(fit["problems"]) if fit.get("ok") is False else []
+
     def programs(self) -> Runner:
         """The programs' session, for the closed loop (`sim.loop`): perceive, relate, plan."""
         return self.runner()

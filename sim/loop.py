@@ -22,6 +22,12 @@ their own robot exactly as a trial does:
 Bounded by a `RecoveryBudget` (replans, wall-clock seconds): a loop that would exceed it stops
 with status ``gave_up`` and says which bound it met. An object the new observation does not show
 (hidden behind another) keeps its believed pose.
+
+A loop with a `judge` (what is wrong with a look's records as an explanation of its
+observation; `ProgramPolicy.look_problems` renders them with the set's own `render` and compares
+depths, `artifacts.fit`) asks it about the last look before it says done: a part that fell in a
+way the programs cannot represent (a cylinder on its side read as standing) makes the loop give
+up saying so, instead of ending "done" off the goal.
 """
 
 from __future__ import annotations
@@ -87,11 +93,15 @@ class ClosedLoop:
         domain: the task family (its meshes' symmetries and scoring tolerance).
         programs: perceive / relate / plan (`Programs`).
         budget: the recovery budget.
+        judge: optional, `judge(observation, records)` → what is wrong with `records` (what
+            `perceive` read) as an explanation of `observation`, [] when nothing is; asked of
+            the last look before the loop says done.
     """
 
     domain: Domain
     programs: Programs
     budget: RecoveryBudget = field(default_factory=RecoveryBudget)
+    judge: Callable[[Mapping[str, Any], list[dict]], list[str]] | None = None
     status: Status = "running"
     reason: str | None = None
     events: list[LoopEvent] = field(default_factory=list)
@@ -110,6 +120,7 @@ class ClosedLoop:
         # an object's pose taken from a look over what was believed before: (before, seen)
         self._looked: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._refuted: dict[str, list[np.ndarray]] = {}  # seen poses a grasp found empty
+        self._last_look: tuple[Mapping[str, Any], list[dict]] | None = None  # for the judge
 
     # -- starting -------------------------------------------------------------------------
 
@@ -163,6 +174,7 @@ class ClosedLoop:
         recalled = not ok and missed and self._recall(oid)  # before the new look is judged
         seen = self.programs.perceive(observation)
         self.observations += 1
+        self._last_look = (observation, seen)
         unconfirmed: list[str] = []
         if look_again is not None and any(self._away(r) is not None for r in seen or []):
             again = self.programs.perceive(look_again())
@@ -339,6 +351,12 @@ class ClosedLoop:
 
     def _next(self) -> dict | None:
         if not self.remaining:
+            problems = self._misfit()
+            if problems:
+                return self._stop(
+                    f"the last look does not fit what perceive read ({clip(problems[0], 160)}):"
+                    " a part may rest in a way the programs cannot represent"
+                )
             self.status = "done"
             self.events.append(LoopEvent(kind="done", step=self.reported))
             return None
@@ -346,6 +364,13 @@ class ClosedLoop:
             return self._stop(f"the recovery budget of {self.budget.seconds:g} s is spent")
         self._current = self.remaining.pop(0)
         return self._current
+
+    def _misfit(self) -> list[str]:
+        """The judge's problems with the last look (none without a judge or a look)."""
+        if self.judge is None or self._last_look is None:
+            return []
+        observation, seen = self._last_look
+        return list(self.judge(observation, seen if isinstance(seen, list) else []))
 
     def _stop(self, reason: str) -> dict | None:
         self.give_up(reason)

@@ -437,7 +437,14 @@ def run_trial(
             assert isinstance(believed_start, Mapping) and isinstance(out.goal_state, Mapping)
             closed = _ClosedTrial(domain, instance, camera, protocol, executor, injector, deadline)
             step_info, last_failure, loop_record = closed.run(
-                ClosedLoop(domain, policy.programs(), budget=budget or RecoveryBudget()),
+                ClosedLoop(
+                    domain,
+                    policy.programs(),
+                    budget=budget or RecoveryBudget(),
+                    judge=functools.partial(policy.look_problems, domain)
+                    if callable(getattr(policy, "look_problems", None))
+                    else None,
+                ),
                 believed_start,
                 out.goal_state,
                 plan,

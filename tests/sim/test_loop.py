@@ -249,6 +249,31 @@ def test_an_infeasible_replan_gives_up_saying_so(cubes):
         loop.report(ok=True, observation=_obs())
 
 
+def test_a_last_look_its_judge_finds_wrong_ends_the_loop_gave_up_not_done(cubes):
+    """The judge is asked once, about the last look, before the loop says done: a part read
+    where the image does not show it (a fallen part read as standing) is a give-up, said."""
+    asked: list[tuple[dict, list]] = []
+
+    def judge(observation, records):
+        asked.append((observation, records))
+        return ["'a' (cube): the observed depth differs from its perceived shape by 26 mm"]
+
+    lasts = []
+    for verdict, status in ((judge, "gave_up"), (lambda o, r: [], "done")):
+        loop = ClosedLoop(cubes, Scripted(), judge=verdict)
+        a0, a1 = _at(0.5, 0.0), _at(0.4, 0.0)
+        loop.begin(_obs(a=a0), _obs(a=a1))
+        lasts.append(_obs(a=a1))
+        assert loop.report(ok=True, observation=lasts[-1]) is None
+        assert loop.status == status
+    assert len(asked) == 1 and asked[0][0] is lasts[0] and asked[0][1][0]["id"] == "a"
+    loop = ClosedLoop(cubes, Scripted(), judge=judge)
+    loop.begin(_obs(a=_at(0.5, 0.0)), _obs(a=_at(0.4, 0.0)))
+    loop.report(ok=True, observation=_obs(a=_at(0.4, 0.0)))
+    assert loop.reason.startswith("the last look does not fit what perceive read ('a' (cube)")
+    assert loop.to_dict()["events"][-1]["kind"] == "gave_up"
+
+
 def test_the_loop_never_reads_a_simulator():
     source = (REPO / "sim" / "loop.py").read_text()
     imported = {
@@ -387,3 +412,33 @@ def test_a_fault_that_tips_a_part_onto_another_face_says_so():
     assert judged((pillar, (1, 0, 0), np.pi)) == []  # upside down: the same square pillar
     assert judged((pillar, (1, 0, 0), np.pi / 2)) == [pillar]
     assert judged((roof, (0, 1, 0), np.pi)) == [roof]  # a roof on its ridge is not on its base
+
+
+@pytest.mark.slow
+def test_the_frozen_sets_judge_finds_a_fallen_cylinder_read_as_standing():
+    """`ProgramPolicy.look_problems`, the trials' judge: the assembly programs read a cylinder
+    lying on its side as a standing one, and its rendering does not fit the observed depth; the
+    same scene with the cylinder standing fits."""
+    from sim.observation import observe
+
+    domain = domains.load("assembly")
+    scene = domain.benchmark_instance(1, 1, physics=physical_problems).start
+    cylinder = next(o for o in scene["objects"] if o["mesh"] == "cylinder")
+    policy = ProgramPolicy(load("assembly"), "artifacts", sandbox="local")
+    try:
+        problems = {}
+        for pose in ("standing", "lying"):
+            T = np.asarray(cylinder["pose"], float).copy()
+            if pose == "lying":  # on its side: axis along x, resting on its curved face
+                T[:3, :3] = T[:3, :3] @ np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+                T[2, 3] = 0.020  # its axis 20 mm up (the origin: its bottom face's centre)
+            objects = [
+                {**o, "pose": T} if o is cylinder else o for o in scene["objects"]
+            ]  # fmt: skip
+            obs = observe(domain, {**scene, "objects": objects}, "front", seed=1)
+            records = policy.runner().perceive(obs)
+            problems[pose] = policy.look_problems(domain, obs, records)
+    finally:
+        policy.close()
+    assert problems["standing"] == []
+    assert any(p.startswith(f"'{cylinder['id']}'") for p in problems["lying"]), problems
