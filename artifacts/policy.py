@@ -69,10 +69,17 @@ class ProgramPolicy:
 
     def look_problems(self, domain: Any, observation: dict, records: list[dict]) -> list[str]:
         """What `artifacts.fit` finds wrong with `records` as an explanation of `observation`
-        (the closed loop's judge, `sim.loop`): [] when they fit, or when the fit cannot be
+        (the closed loop's judge, `sim.loop`): its problems, and a part standing where nothing
+        was perceived (`SceneFit.loose_part`); [] when they fit, or when the fit cannot be
         judged (no refusal on a failing `render`)."""
-        fit = _fit(domain, observation, {"objects": records}, self.runner())
-        return list(fit["problems"]) if fit.get("ok") is False else []
+        from artifacts.fit import scene_fit
+
+        try:
+            fit = scene_fit(domain, observation, records, self.runner().render)
+        except Exception:
+            return []
+        loose = fit.loose_part()
+        return [*fit.problems, *([loose] if loose else [])]
 
     def programs(self) -> Runner:
         """The programs' session, for the closed loop (`sim.loop`): perceive, relate, plan."""

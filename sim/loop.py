@@ -108,6 +108,7 @@ class ClosedLoop:
     replans: int = 0
     observations: int = 0
     reported: int = 0
+    cause: str | None = None  # the stage a give-up points at, where the loop knows it
 
     def __post_init__(self) -> None:
         self.belief: dict[str, np.ndarray] = {}
@@ -353,6 +354,7 @@ class ClosedLoop:
         if not self.remaining:
             problems = self._misfit()
             if problems:
+                self.cause = "perception"
                 return self._stop(
                     f"the last look does not fit what perceive read ({clip(problems[0], 160)}):"
                     " a part may rest in a way the programs cannot represent"
@@ -388,5 +390,6 @@ class ClosedLoop:
             "replans": self.replans,
             "observations": self.observations,
             "transfers": self.reported,
+            "cause": self.cause,
             "events": [e.to_dict() for e in self.events],
         }

@@ -25,7 +25,7 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import mujoco
 import numpy as np
@@ -281,12 +281,14 @@ def set_lighting(model: mujoco.MjModel, data: mujoco.MjData, lighting: Lighting)
 
 
 def build_spec(
-    domain: Domain, scene: Mapping, *, with_robot: bool = False, robot_visuals: bool = True
-) -> mujoco.MjSpec:
+    domain: Domain, scene: Mapping, *, with_robot: bool = False,
+    robot_visuals: bool | Literal["coarse"] = True,
+) -> mujoco.MjSpec:  # fmt: skip
     """The MuJoCo spec of a (parsed) scene: world, cameras and objects at their poses.
 
     `robot_visuals=False`: the robot without its visual meshes, the same physics
-    (`sim.robot.attach_robot`), for a model that is simulated but never rendered.
+    (`sim.robot.attach_robot`), for a model that is simulated but never rendered;
+    `"coarse"`: its visual meshes merged on a millimetre grid, for a model that only draws.
     """
     spec = mujoco.MjSpec()
     spec.modelname = f"rivet_{domain.name}"

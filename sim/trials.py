@@ -49,7 +49,7 @@ from sim.executor import Executor, ExecutorConfig
 from sim.faults import Fault, Injector, biased
 from sim.faults import draw as draw_fault
 from sim.loop import ClosedLoop, RecoveryBudget
-from sim.observation import Renderer, observe
+from sim.observation import Renderer, observe, release_renderers
 from sim.scene import body_name, build_spec
 from sim.score import final_success, state_accuracy
 from sim.sensing import EXACT, WRIST_CAMERA, Sensors
@@ -291,6 +291,7 @@ def run_trial(
     failure: tuple[Stage, str] | None = None
     t0 = time.perf_counter()
     deadline = t0 + deadline_s
+    trim_heap()  # what the process's earlier work (the last trial, its setup) left free
     start_obs, goal_obs = observations(domain, instance, camera, protocol)
     timings["observe"] = time.perf_counter() - t0
     if record_dir is not None:
@@ -390,8 +391,11 @@ def run_trial(
     if plan is not None and plan["status"] == "ok":
         t = time.perf_counter()
         model, data = _world(domain, instance)
+        trim_heap()  # what the world's compile left free
         ids = [o["id"] for o in instance.start["objects"]]
         view = domain.camera(camera) if isinstance(camera, str) else camera
+        if record_dir is not None and loop == "open":
+            release_renderers()  # no look until the next trial: the video's context takes its place
         recorder = (
             _Recorder(model, _twin(domain, ids), view, record_dir / "trial.mp4")
             if record_dir is not None
@@ -452,8 +456,9 @@ def run_trial(
             timings["loop_programs"] = closed.program_seconds
             if loop_record["status"] == "gave_up" and failure is None:
                 failure = (
-                    _STAGE_OF_KIND.get(last_failure.kind, "execution") if last_failure
-                    else "execution",
+                    loop_record.get("cause")
+                    or (_STAGE_OF_KIND.get(last_failure.kind, "execution") if last_failure
+                        else "execution"),
                     f"the closed loop gave up: {loop_record['reason']}",
                 )  # fmt: skip
             result_failure = last_failure if loop_record["status"] != "done" else None
@@ -694,7 +699,7 @@ _TWINS: dict[tuple[str, frozenset[str]], mujoco.MjModel] = {}
 
 
 def _twin(domain: Domain, object_ids: Iterable[str]) -> mujoco.MjModel:
-    """A world with the robot's visual meshes and the objects `object_ids` (at the origin:
+    """A world with the robot's (coarsened) visual meshes and the objects `object_ids` (at the origin:
     the recorder sets every joint from the trial's), for the recordings to draw. Compiled once
     per object set and process, the last set's only, outside MuJoCo's mesh cache."""
     key = (domain.name, frozenset(object_ids))
@@ -707,7 +712,9 @@ def _twin(domain: Domain, object_ids: Iterable[str]) -> mujoco.MjModel:
             ],
         }
         with robot.no_mesh_cache():
-            _TWINS[key] = build_spec(domain, scene, with_robot=True).compile()
+            _TWINS[key] = build_spec(
+                domain, scene, with_robot=True, robot_visuals="coarse"
+            ).compile()
     return _TWINS[key]
 
 
@@ -720,6 +727,15 @@ def prepare(domain: Domain, *, record: bool = False) -> None:
     robot.geom_inertials()
     if record:
         _twin(domain, domain.object_ids)
+    trim_heap()
+
+
+def trim_heap() -> None:
+    """Give the heap's free memory back to the system (glibc's `malloc_trim`). A compile
+    leaves tens of thousands of small freed blocks behind, which the allocator otherwise keeps:
+    about 60 MB after the robot's inertias and 60 MB after a recording's world. A no-op where
+    the C library is not glibc."""
+    _glibc("malloc_trim", 0)
 
 
 def _return_large_blocks() -> None:
@@ -729,15 +745,18 @@ def _return_large_blocks() -> None:
     images and meshes (a few MB each) then stay in the heap after use: a recorded trial peaked
     about 100 MB higher (`rivet eval cubes --trials 2 --workers 1 --record DIR`). No effect
     where the C library is not glibc."""
+    m_mmap_threshold = -3  # glibc's malloc.h
+    _glibc("mallopt", m_mmap_threshold, 1 << 20)
+
+
+def _glibc(function: str, *args: int) -> None:
+    """Call a glibc allocator function; nothing where the C library has none."""
+    import contextlib
     import ctypes
     import ctypes.util
 
-    m_mmap_threshold = -3  # glibc's malloc.h
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        libc.mallopt(m_mmap_threshold, 1 << 20)
-    except (OSError, AttributeError):
-        pass
+    with contextlib.suppress(OSError, AttributeError):
+        getattr(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6"), function)(*args)
 
 
 def _final_scene(domain: Domain, instance: Instance, model, data) -> dict:

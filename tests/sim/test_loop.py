@@ -272,6 +272,7 @@ def test_a_last_look_its_judge_finds_wrong_ends_the_loop_gave_up_not_done(cubes)
     loop.report(ok=True, observation=_obs(a=_at(0.4, 0.0)))
     assert loop.reason.startswith("the last look does not fit what perceive read ('a' (cube)")
     assert loop.to_dict()["events"][-1]["kind"] == "gave_up"
+    assert loop.to_dict()["cause"] == "perception"
 
 
 def test_the_loop_never_reads_a_simulator():
@@ -415,10 +416,11 @@ def test_a_fault_that_tips_a_part_onto_another_face_says_so():
 
 
 @pytest.mark.slow
-def test_the_frozen_sets_judge_finds_a_fallen_cylinder_read_as_standing():
-    """`ProgramPolicy.look_problems`, the trials' judge: the assembly programs read a cylinder
-    lying on its side as a standing one, and its rendering does not fit the observed depth; the
-    same scene with the cylinder standing fits."""
+def test_the_frozen_sets_judge_finds_a_fallen_cylinder():
+    """`ProgramPolicy.look_problems`, the trials' judge: the assembly programs have no lying
+    cylinder; what they read of one on its side (a standing cylinder there, whose rendering
+    does not fit the observed depth, or one elsewhere, leaving the fallen one unexplained) is
+    found wrong. The same scene with the cylinder standing fits."""
     from sim.observation import observe
 
     domain = domains.load("assembly")
@@ -441,4 +443,4 @@ def test_the_frozen_sets_judge_finds_a_fallen_cylinder_read_as_standing():
     finally:
         policy.close()
     assert problems["standing"] == []
-    assert any(p.startswith(f"'{cylinder['id']}'") for p in problems["lying"]), problems
+    assert problems["lying"], problems  # read as a standing cylinder there, or elsewhere
