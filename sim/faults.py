@@ -168,6 +168,7 @@ class Injector:
             executor.grip_override = robot.GRIPPER_OPEN
             f.record = {"happened": True, "object": oid, "sim_time": round(self.data.time, 3),
                         "detail": "the hand let the part go as the transfer began"}  # fmt: skip
+            self._upright = self._rotations()  # the part in the hand as it was picked
         elif f.name == "push" and phase == "done":
             self._displace(oid, PUSH_M, turn=False, what="pushed")
         elif f.name == "move" and phase == "done":

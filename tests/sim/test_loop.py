@@ -444,3 +444,40 @@ def test_the_frozen_sets_judge_finds_a_fallen_cylinder():
         policy.close()
     assert problems["standing"] == []
     assert problems["lying"], problems  # read as a standing cylinder there, or elsewhere
+
+
+def test_a_slip_is_judged_for_topples_once_the_part_came_to_rest():
+    """The slip fault records the parts' rotations as the hand lets go; `SETTLE_S` of sim time
+    later (at the next phase the executor reports), or at the trial's end, it says which parts
+    ended on another face."""
+    import types
+
+    import mujoco
+
+    from sim.faults import SETTLE_S, Injector
+    from sim.scene import body_name
+    from sim.trials import _world
+
+    domain = domains.load("assembly")
+    instance = domain.benchmark_instance(1, 1, physics=physical_problems)
+    model, data = _world(domain, instance)
+    meshes = {
+        o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
+        for o in instance.start["objects"]
+    }
+    arch = next(o["id"] for o in instance.start["objects"] if o["mesh"] == "arch")
+    injector = Injector(Fault(name="slip", step=0, trial="t"), model, data, meshes)
+    hand = types.SimpleNamespace(grip_override=None)
+    injector.on_phase(hand, "grasp", arch)
+    injector.on_phase(hand, "transfer", arch)
+    assert injector.fault.happened and hand.grip_override is not None
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name(arch))
+    adr = int(model.jnt_qposadr[model.body_jntadr[body]])
+    data.qpos[adr + 3 : adr + 7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # on its side
+    mujoco.mj_forward(model, data)
+    injector.on_phase(hand, "place", arch)  # too soon: not judged yet
+    assert "toppled" not in injector.fault.record
+    data.time += SETTLE_S
+    injector.on_phase(hand, "park", arch)
+    assert injector.fault.to_dict()["toppled"] == [arch]
+    assert injector.fault.record["detail"].endswith(f"left {arch} on another face")
