@@ -44,6 +44,8 @@ from contracts.limits import clip
 from domains import Domain
 
 Status = Literal["running", "done", "gave_up"]
+FAR_AGREE_SHARE = 0.25  # two looks that put an object far from its belief agree when they are
+# closer to each other than this share of that distance (`ClosedLoop._agree`)
 
 
 class Programs(Protocol):
@@ -306,7 +308,7 @@ class ClosedLoop:
                 continue
             oid, T, mesh = away
             T2 = second.get(oid)
-            if T2 is not None and self._near(T, T2, mesh):
+            if T2 is not None and self._agree(oid, T, T2, mesh):
                 kept.append(r)
             elif T2 is None:
                 unconfirmed.append(f"{oid} (not shown)")
@@ -314,6 +316,21 @@ class ClosedLoop:
                 t, _ = se3.pose_error(T2, T, self._symmetries(mesh))
                 unconfirmed.append(f"{oid} ({1000 * t:.0f} mm from the first)")
         return kept, unconfirmed
+
+    def _agree(self, oid: str, T: np.ndarray, T2: np.ndarray, mesh: str) -> bool:
+        """Whether two looks agree on an object: within the scoring tolerance of each other,
+        or — when both put it far from its belief — their positions closer to each other than
+        `FAR_AGREE_SHARE` of that distance, whatever their turns (a part half hidden behind
+        another reads a few millimetres and degrees differently on each photo, but a part 18 cm
+        from where it was believed has moved)."""
+        if self._near(T, T2, mesh):
+            return True
+        before = self.belief.get(oid)
+        if before is None:
+            return False
+        apart = float(np.linalg.norm(T[:3, 3] - T2[:3, 3]))
+        moved = min(float(np.linalg.norm(X[:3, 3] - before[:3, 3])) for X in (T, T2))
+        return moved > self.domain.tolerance.translation and apart <= FAR_AGREE_SHARE * moved
 
     def _differences(self, seen: list[dict]) -> list[str]:
         """What the observation shows otherwise than believed, beyond the scoring tolerance;

@@ -215,6 +215,26 @@ def test_a_second_look_that_shows_a_part_moved_again_is_believed(cubes):
     assert np.allclose(loop.belief["a"], pushed)
 
 
+def test_two_looks_that_both_show_a_part_far_from_its_belief_are_believed(cubes):
+    """A part the robot believes placed but that both looks show 180 mm away (a skipped
+    transfer), 15 mm apart and turned differently (half hidden): it has moved — replanned. The
+    same 15 mm between two looks 30 mm from the belief is a poor reading — kept."""
+    turned = _at(0.58, 0.0)
+    turned[:3, :3] = se3.rot_z(0.5)[:3, :3]
+    b0, a1, b1 = _at(0.5, 0.1), _at(0.4, 0.0), _at(0.4, 0.1)
+    for first, second, replanned in (
+        (_at(0.58, 0.015), turned, True),
+        (_at(0.43, 0.0), _at(0.43, 0.015), False),
+    ):
+        loop = ClosedLoop(cubes, Scripted())
+        loop.begin(_obs(a=_at(0.6, 0.0), b=b0), _obs(a=a1, b=b1))
+        step = loop.report(
+            ok=True, observation=_obs(a=first, b=b0), look_again=lambda s=second: _obs(a=s, b=b0)
+        )
+        assert (loop.replans == 1) is replanned, loop.events[-1].detail
+        assert step["object"] == "a" if replanned else step["object"] == "b"
+
+
 def test_a_scene_as_believed_takes_no_second_look(cubes):
     loop = ClosedLoop(cubes, Scripted())
     a0, a1, b0 = _at(0.5, 0.0), _at(0.4, 0.0), _at(0.5, 0.1)
