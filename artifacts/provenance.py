@@ -33,9 +33,12 @@ def commit() -> str | None:
 
 def dirty() -> bool | None:
     """Whether a tracked file differs from the commit (None outside a git checkout), results
-    aside: `rivet eval`'s dev runs rewrite artifacts/<d>/eval.json, which no run reads."""
+    aside — files that runs write and no run reads: artifacts/<d>/eval.json (`rivet eval`'s
+    dev runs), and docs/results/ and docs/results.md (`make results-runs` writes each run's
+    file there as it goes, so every run after the first would otherwise count as dirty)."""
     out = _git("status", "--porcelain", "--untracked-files=no", "--", ".",
-               ":(exclude,glob)artifacts/*/eval.json")  # fmt: skip
+               ":(exclude,glob)artifacts/*/eval.json", ":(exclude,glob)docs/results/*.json",
+               ":(exclude)docs/results.md")  # fmt: skip
     return None if out is None else bool(out.strip())
 
 
