@@ -6,7 +6,9 @@ nothing crosses process boundaries but instance names and JSON results.
 Every finished trial is appended to a trial log (`TrialLog`, JSON lines, fsynced) as it
 finishes: an interrupted run keeps what it finished, and `resume` continues it, running only
 the trials the log does not hold. The log's first line is the evaluation's configuration; a
-log of another configuration is refused, never mixed in.
+log of another configuration is refused, never mixed in. Interrupted (Ctrl-C, or SIGTERM to the
+command alone, as a cancelled CI job sends), a pool of workers stops at once: the trials not
+begun are cancelled, and each worker ends its trial, closes its sandbox and exits (`_stop`).
 """
 
 from __future__ import annotations
@@ -72,6 +74,11 @@ def make_policy(config: EvalConfig) -> Any:
 _WORKER: dict[str, Any] = {}
 
 
+def _init_pool_worker(config: EvalConfig) -> None:
+    _stop_on_sigterm()
+    _init_worker(config)
+
+
 def _init_worker(config: EvalConfig) -> None:
     import domains
     from sim.trials import prepare
@@ -82,7 +89,48 @@ def _init_worker(config: EvalConfig) -> None:
     _WORKER["config"] = config
 
 
+def _stop_on_sigterm() -> None:
+    """A pool worker's SIGTERM (what `run_eval` sends each worker when it is interrupted) ends
+    the worker now: a trial under way unwinds as on Ctrl-C, the worker's sandbox session closes
+    (its container removed), and the process exits. Only the first SIGTERM counts."""
+    import signal
+
+    def on_sigterm(signum: int, frame: Any) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if _WORKER.get("busy"):
+            raise _Stopped  # `_run_one` closes the policy and exits
+        _exit_worker()
+
+    signal.signal(signal.SIGTERM, on_sigterm)
+
+
+class _Stopped(BaseException):
+    """A trial worker told to stop (SIGTERM) in the middle of a trial."""
+
+
+def _exit_worker() -> None:
+    import os
+
+    policy = _WORKER.get("policy")
+    try:
+        if policy is not None and callable(getattr(policy, "close", None)):
+            policy.close()
+    finally:
+        os._exit(143)
+
+
 def _run_one(instance_json: dict) -> dict:
+    _WORKER["busy"] = True
+    try:
+        return _trial(instance_json)
+    except _Stopped:
+        _exit_worker()
+        raise  # not reached
+    finally:
+        _WORKER["busy"] = False
+
+
+def _trial(instance_json: dict) -> dict:
     from domains.instance import Instance
     from sim.trials import run_trial
 
@@ -212,14 +260,37 @@ def run_eval(
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")  # a fresh GL context per worker; no forked EGL state
-        with ProcessPoolExecutor(
-            workers, mp_context=ctx, initializer=_init_worker, initargs=(config,)
-        ) as pool:
+        pool = ProcessPoolExecutor(
+            workers, mp_context=ctx, initializer=_init_pool_worker, initargs=(config,)
+        )
+        try:
             futures = {pool.submit(_run_one, inst): i for i, inst in todo}
             for fut in as_completed(futures):
                 done(futures[fut], fut.result())
+        except BaseException:  # Ctrl-C, SIGTERM (the CLI's), a failing callback
+            _stop(pool)
+            raise
+        pool.shutdown(wait=True)
     per_trial = [results[i] for i in range(len(instances))]
     return summarise(config, per_trial)
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """Stop an interrupted pool now, not after its running trials: cancel the trials not begun,
+    send each worker SIGTERM (`_stop_on_sigterm`: its trial unwinds, its sandbox closes, it
+    exits), and wait for them. The finished trials are in the log already."""
+    import contextlib
+    import os
+    import signal
+
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # the pool's own
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        with contextlib.suppress(OSError, AttributeError):
+            os.kill(process.pid, signal.SIGTERM)
+    for process in processes:
+        with contextlib.suppress(AttributeError, ValueError, AssertionError):
+            process.join(timeout=60)
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float] | None:

@@ -266,3 +266,54 @@ def test_an_interrupted_evaluation_keeps_its_trials_and_resume_runs_only_the_res
         cwd=REPO,
     )
     assert other.returncode == 2 and "is the log of another evaluation" in other.stderr
+
+
+def test_sigterm_stops_a_pool_of_workers_at_once_and_keeps_the_finished_trials(tmp_path):
+    """SIGTERM to `rivet eval --workers 2` alone (a CI job cancelled; the workers get no
+    signal of their own): the trials not begun are cancelled and the running ones end now — the
+    log holds at most the trials finished by then, not all four — and no worker outlives it."""
+    import signal
+    import time
+
+    out = tmp_path / "oracle.json"
+    log = tmp_path / "oracle.cubes.front.trials.jsonl"
+    argv = [RIVET, "eval", "cubes", "--policy", "oracle", "--trials", "4", "--workers", "2"]
+    proc = subprocess.Popen(
+        [*argv, "--json", str(out), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+    )
+    lines: list[str] = []
+    while proc.poll() is None and len(lines) < 2:  # the header and one finished trial
+        time.sleep(0.2)
+        lines = log.read_text().splitlines() if log.is_file() else []
+    workers = [
+        int(p.name)
+        for p in Path("/proc").iterdir()
+        if p.name.isdigit() and _parent(p) == proc.pid and "spawn_main" in _cmdline(p)
+    ]
+    assert len(workers) == 2
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err[-2000:]
+    assert f"the finished trials are kept in {log}" in err and "Traceback" not in err
+    assert 2 <= len(log.read_text().splitlines()) <= 3  # one trial, or the other one's too
+    assert not any(Path(f"/proc/{pid}").exists() and _parent(Path(f"/proc/{pid}")) != 0
+                   for pid in workers)  # fmt: skip
+    assert not out.exists()
+
+
+def _parent(proc_dir: Path) -> int:
+    try:
+        return int((proc_dir / "stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return 0
+
+
+def _cmdline(proc_dir: Path) -> str:
+    try:
+        return (proc_dir / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
