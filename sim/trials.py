@@ -699,9 +699,10 @@ _TWINS: dict[tuple[str, frozenset[str]], mujoco.MjModel] = {}
 
 
 def _twin(domain: Domain, object_ids: Iterable[str]) -> mujoco.MjModel:
-    """A world with the robot's (coarsened) visual meshes and the objects `object_ids` (at the origin:
-    the recorder sets every joint from the trial's), for the recordings to draw. Compiled once
-    per object set and process, the last set's only, outside MuJoCo's mesh cache."""
+    """A world with the robot's visual meshes (coarse: `robot.attach_robot`) and the objects
+    `object_ids` (at the origin: the recorder sets every joint from the trial's), for the
+    recordings to draw. Compiled once per object set and process, the last set's only, outside
+    MuJoCo's mesh cache."""
     key = (domain.name, frozenset(object_ids))
     if key not in _TWINS:
         _TWINS.clear()
@@ -751,12 +752,21 @@ def _return_large_blocks() -> None:
 
 def _glibc(function: str, *args: int) -> None:
     """Call a glibc allocator function; nothing where the C library has none."""
-    import contextlib
+    libc = _libc()
+    if libc is not None and hasattr(libc, function):
+        getattr(libc, function)(*args)
+
+
+@functools.cache
+def _libc() -> Any:
+    """The C library, loaded once (finding it runs `ldconfig`); None where it cannot be."""
     import ctypes
     import ctypes.util
 
-    with contextlib.suppress(OSError, AttributeError):
-        getattr(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6"), function)(*args)
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+    except OSError:
+        return None
 
 
 def _final_scene(domain: Domain, instance: Instance, model, data) -> dict:
