@@ -461,11 +461,12 @@ def _faults(got: Files, names: Sequence[str]) -> list[str]:
                 out.append(f"| {d} | {f} | {opened} | not run | | | | | | |")
                 continue
             k, n = row["recovered"], row["happened"]
-            toppled = row.get("toppled")
+            # a run made before topples were recorded: none to count when every trial recovered
+            toppled = row.get("toppled", 0 if k == n else None)
             rest = (
                 "not recorded"
                 if toppled is None
-                else rate(k, n - toppled, row.get("recoverable_interval"))
+                else rate(k, n - toppled, row.get("recoverable_interval", row["interval"]))
             )
             out.append(
                 f"| {d} | {f} | {opened} | {n}/{row['drawn']} | {k} | {row['gave_up']}"
