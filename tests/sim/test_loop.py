@@ -386,14 +386,8 @@ def test_the_closed_loop_needs_programs(cubes_trial):
         run_trial(domain, instance, OraclePolicy(), loop="closed")
 
 
-def test_a_fault_that_tips_a_part_onto_another_face_says_so():
-    """The injector judges, from the world's truth, which parts a fault left on another face:
-    turned about the vertical or flipped onto a face its symmetry makes the same, a part is not
-    toppled; on its side it is."""
-    import mujoco
-
-    from sim.faults import Injector
-    from sim.scene import body_name
+def _assembly_world():
+    """An assembly start's physics world and the (mesh, symmetries) the injector takes."""
     from sim.trials import _world
 
     domain = domains.load("assembly")
@@ -403,6 +397,19 @@ def test_a_fault_that_tips_a_part_onto_another_face_says_so():
         o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
         for o in instance.start["objects"]
     }
+    return instance, model, data, meshes
+
+
+def test_a_fault_that_tips_a_part_onto_another_face_says_so():
+    """The injector judges, from the world's truth, which parts a fault left on another face:
+    turned about the vertical or flipped onto a face its symmetry makes the same, a part is not
+    toppled; on its side it is."""
+    import mujoco
+
+    from sim.faults import Injector
+    from sim.scene import body_name
+
+    instance, model, data, meshes = _assembly_world()
     kinds = {o["id"]: o["mesh"] for o in instance.start["objects"]}
     pillar = next(i for i, m in kinds.items() if m.startswith("pillar"))
     roof = next(i for i, m in kinds.items() if m == "roof")
@@ -476,15 +483,8 @@ def test_a_slip_is_judged_for_topples_once_the_part_came_to_rest():
 
     from sim.faults import SETTLE_S, Injector
     from sim.scene import body_name
-    from sim.trials import _world
 
-    domain = domains.load("assembly")
-    instance = domain.benchmark_instance(1, 1, physics=physical_problems)
-    model, data = _world(domain, instance)
-    meshes = {
-        o["id"]: (domain.mesh(o["mesh"]), list(domain.symmetries(o["mesh"])))
-        for o in instance.start["objects"]
-    }
+    instance, model, data, meshes = _assembly_world()
     arch = next(o["id"] for o in instance.start["objects"] if o["mesh"] == "arch")
     injector = Injector(Fault(name="slip", step=0, trial="t"), model, data, meshes)
     hand = types.SimpleNamespace(grip_override=None)
