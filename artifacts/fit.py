@@ -104,6 +104,7 @@ class SceneFit:
             "problems": self.problems,
             "unexplained": round(self.unexplained, 3),
             "largest_unexplained_px": self.largest_unexplained_px,
+            "loose_part": self.loose_part(),
             "foreground_px": self.foreground_px,
             "objects": [o.to_dict() for o in self.objects],
         }

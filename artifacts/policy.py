@@ -72,14 +72,10 @@ class ProgramPolicy:
         (the closed loop's judge, `sim.loop`): its problems, and a part standing where nothing
         was perceived (`SceneFit.loose_part`); [] when they fit, or when the fit cannot be
         judged (no refusal on a failing `render`)."""
-        from artifacts.fit import scene_fit
-
-        try:
-            fit = scene_fit(domain, observation, records, self.runner().render)
-        except Exception:
+        fit = _fit(domain, observation, {"objects": records}, self.runner())
+        if fit["ok"] is None:
             return []
-        loose = fit.loose_part()
-        return [*fit.problems, *([loose] if loose else [])]
+        return [*fit["problems"], *([fit["loose_part"]] if fit.get("loose_part") else [])]
 
     def programs(self) -> Runner:
         """The programs' session, for the closed loop (`sim.loop`): perceive, relate, plan."""
