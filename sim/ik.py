@@ -33,8 +33,12 @@ logging.getLogger("mink").setLevel(logging.WARNING)
 
 
 @functools.cache
-def _ik_model() -> mujoco.MjModel:
-    return robot.build_robot_spec(visuals=False).compile()
+def ik_model() -> mujoco.MjModel:
+    """The arm and hand alone, compiled once per process; outside MuJoCo's global mesh cache,
+    which would otherwise keep the robot's collision meshes (about 23 MB) for good."""
+    spec = robot.build_robot_spec(visuals=False)
+    with robot.no_mesh_cache():
+        return spec.compile()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,7 +72,7 @@ class ArmIK:
     """
 
     def __init__(self, *, posture_cost: float = 1e-3, limit_margin: float = 0.02) -> None:
-        model = _ik_model()
+        model = ik_model()
         self.model = model
         index = robot.RobotIndex.from_model(model)
         self._arm_qpos = index.arm_qpos

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import domains
 from contracts.errors import UsageError
@@ -184,6 +186,40 @@ def test_sensor_model_on_a_flat_grey_image():
             e, g = rl.draw_gains(np.random.default_rng([seed, 2]), level)
             assert abs(math.log2(e)) <= level.exposure and g[1] == 1.0
             assert np.all(np.abs(np.log(g)) <= level.white_balance)
+
+
+def _plain_sensor_rgb(rgb, rng, level, exposure, white_balance):
+    """`sensor_rgb` as the plain expressions of docs/observations.md (its temporaries and all):
+    the in-place version must give the same bytes, or every recorded figure would move."""
+    s = rl.srgb_to_linear(rgb) * np.float32(exposure)
+    var = np.full(s.shape, level.read_noise**2, np.float32)
+    if math.isfinite(level.full_scale_electrons):
+        var += np.maximum(s, 0.0) / np.float32(level.full_scale_electrons)
+    s = s + rng.standard_normal(s.shape, dtype=np.float32) * np.sqrt(var).astype(np.float32)
+    s = np.clip(s, 0.0, 1.0)
+    if white_balance is not None:
+        s = s * np.asarray(white_balance, np.float32)
+    x = np.clip(s, 0.0, 1.0).astype(np.float32)
+    out = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(out * 255.0).astype(np.uint8)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    level=st.sampled_from(sorted(rl.LEVELS)),
+    dark=st.booleans(),
+    balanced=st.booleans(),
+)
+def test_the_sensor_pipeline_is_its_plain_expressions_bit_for_bit(seed, level, dark, balanced):
+    g = np.random.default_rng(seed)
+    rgb = g.integers(0, 12 if dark else 256, (37, 53, 3), dtype=np.uint8)  # dark: the sRGB toe
+    lv = rl.LEVELS[level]
+    exposure, wb = rl.draw_gains(g, lv)
+    wb = wb if balanced else None
+    ours = rl.sensor_rgb(rgb, np.random.default_rng(seed), lv, exposure=exposure, white_balance=wb)
+    plain = _plain_sensor_rgb(rgb, np.random.default_rng(seed), lv, exposure, wb)
+    assert np.array_equal(ours, plain)
 
 
 # -- calibration ----------------------------------------------------------------------------

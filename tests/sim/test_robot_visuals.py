@@ -55,7 +55,7 @@ def test_the_ik_on_the_stripped_robot_is_the_full_robots(monkeypatch):
     lite = ik.ArmIK()
     assert lite.model.nmeshvert < 100_000  # the IK's own model is the stripped one
     full_model = robot.build_robot_spec(visuals=True).compile()
-    monkeypatch.setattr(ik, "_ik_model", lambda: full_model)
+    monkeypatch.setattr(ik, "ik_model", lambda: full_model)
     full = ik.ArmIK()
     rng = np.random.default_rng(1)
     for _ in range(60):
@@ -110,3 +110,21 @@ def test_a_recording_draws_the_trial_state_with_the_robots_meshes(tmp_path):
         else:
             assert difference < 0.1  # the same picture (0.02 here: a few edge pixels)
     reference.close()
+
+
+def test_a_recording_worker_keeps_no_mesh_cache():
+    """The IK's model and a recorded trial's world compile outside MuJoCo's global mesh cache,
+    which would keep the robot's collision meshes (about 23 MB) in a worker whose peak memory
+    has a target; an unrecorded trial's world still uses it (a faster next compile)."""
+    from sim import trials
+
+    domain = load("cubes")
+    instance = domain.benchmark("dev")[0]
+    cache = mujoco.mj_getCache()
+    mujoco.mj_clearCache(cache)
+    ik.ik_model.cache_clear()
+    ik.ik_model()
+    trials._world(domain, instance, mesh_cache=False)
+    assert mujoco.mj_getCacheSize(cache) == 0
+    trials._world(domain, instance)
+    assert mujoco.mj_getCacheSize(cache) > 10 << 20
