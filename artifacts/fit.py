@@ -48,6 +48,8 @@ RESIDUAL_MAX_M = 0.015  # [m] per object: median |observed − rendered depth| o
 UNEXPLAINED_MAX = 0.25  # share of the observed foreground no perceived object covers
 MIN_PIXELS = 100  # [px] objects showing fewer inner pixels than this (hidden) are not judged
 EDGE_PX = 2  # [px] an object is judged this far in from its rendered outline
+PREFER_MARGIN_M = 0.003  # [m] an alternative pose explains an object better when its residual
+# is this much smaller (`better_explained`)
 LOOSE_PART_SHARE = 0.5  # an unexplained region this share of the smallest judged object's
 # pixels is a part standing where nothing was perceived (`SceneFit.loose_part`)
 
@@ -199,6 +201,48 @@ def scene_fit(
         problems.insert(0, f"nothing of {domain.name} was perceived, but something stands there")
     return SceneFit(objects=fits, foreground_px=fg, unexplained=unexplained, problems=problems,
                     mask=mask, foreground=foreground, largest_unexplained_px=largest)  # fmt: skip
+
+
+def better_explained(
+    domain: Any,
+    observation: Mapping[str, Any],
+    records: Sequence[Mapping],
+    alternative: Sequence[Mapping],
+    render: Render,
+) -> list[str]:
+    """The ids of the objects whose pose in `alternative` explains `observation` better than
+    their pose in `records` (the same objects; some at other poses): what the closed loop asks
+    before a look moves a belief (`sim.loop.ClosedLoop`'s referee).
+
+    An object is better explained at its `alternative` pose when it is judged there (enough
+    visible pixels) and fits there (`SUPPORT_MIN`, `RESIDUAL_MAX_M`), and at its `records` pose
+    it is hidden, lacks support, or its residual is over `PREFER_MARGIN_M` larger. Where it
+    is hidden at its `alternative` pose, the image says nothing for it: not preferred."""
+    changed = {
+        str(a["id"])
+        for a, b in zip(records, alternative, strict=True)
+        if not np.allclose(se3.as_matrix(a["pose"]), se3.as_matrix(b["pose"]))
+    }
+    if not changed:
+        return []
+    ours = {o.id: o for o in scene_fit(domain, observation, records, render).objects}
+    theirs = {o.id: o for o in scene_fit(domain, observation, alternative, render).objects}
+    out = []
+    for i in sorted(changed):
+        there, here = theirs.get(i), ours.get(i)
+        if there is None or there.support is None or there.residual_m is None:
+            continue  # hidden where the alternative puts it
+        if there.support < SUPPORT_MIN or there.residual_m > RESIDUAL_MAX_M:
+            continue  # the alternative does not explain its pixels either
+        if (
+            here is None
+            or here.support is None
+            or here.residual_m is None
+            or here.support < SUPPORT_MIN
+            or here.residual_m > there.residual_m + PREFER_MARGIN_M
+        ):
+            out.append(i)
+    return out
 
 
 def _eroded(mask: np.ndarray, px: int) -> np.ndarray:

@@ -77,6 +77,19 @@ class ProgramPolicy:
             return []
         return [*fit["problems"], *([fit["loose_part"]] if fit.get("loose_part") else [])]
 
+    def look_prefers_belief(
+        self, domain: Any, observation: dict, seen: list[dict], alternative: list[dict]
+    ) -> list[str]:
+        """The ids of the objects `alternative` (`seen` with some objects at their believed
+        poses) explains `observation` better than `seen` does (`artifacts.fit.better_explained`,
+        the closed loop's referee); none when the fit cannot be judged."""
+        from artifacts.fit import better_explained
+
+        try:
+            return better_explained(domain, observation, seen, alternative, self.runner().render)
+        except Exception:  # the frozen render's fault: no preference
+            return []
+
     def programs(self) -> Runner:
         """The programs' session, for the closed loop (`sim.loop`): perceive, relate, plan."""
         return self.runner()

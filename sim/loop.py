@@ -28,12 +28,18 @@ observation; `ProgramPolicy.look_problems` renders them with the set's own `rend
 depths, `artifacts.fit`) asks it about the last look before it says done: a part that fell in a
 way the programs cannot represent (a cylinder on its side read as standing) makes the loop give
 up saying so, instead of ending "done" off the goal.
+
+A loop with a `referee` asks it, before a look moves a belief, whether the image fits the
+object better where it was believed: two photos from one camera can share a misreading (a cube
+half hidden in a tower, read through a low camera, lands at the same wrong place on both), and
+then only the image itself can tell a misread from a move. `ProgramPolicy.look_prefers_belief`
+renders both explanations with the set's own `render` (`artifacts.fit.better_explained`).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -98,12 +104,16 @@ class ClosedLoop:
         judge: optional, `judge(observation, records)` → what is wrong with `records` (what
             `perceive` read) as an explanation of `observation`, [] when nothing is; asked of
             the last look before the loop says done.
+        referee: optional, `referee(observation, seen, alternative)` → the ids of the objects
+            that `alternative` (`seen` with the objects it would move put back where they are
+            believed) explains better than `seen` does; those keep their belief.
     """
 
     domain: Domain
     programs: Programs
     budget: RecoveryBudget = field(default_factory=RecoveryBudget)
     judge: Callable[[Mapping[str, Any], list[dict]], list[str]] | None = None
+    referee: Callable[[Mapping[str, Any], list[dict], list[dict]], Sequence[str]] | None = None
     status: Status = "running"
     reason: str | None = None
     events: list[LoopEvent] = field(default_factory=list)
@@ -183,16 +193,19 @@ class ClosedLoop:
             again = self.programs.perceive(look_again())
             self.observations += 1
             seen, unconfirmed = self._confirmed(seen, again)
+        seen, refereed = self._refereed(observation, seen)
         off = self._differences(seen)
         self.events.append(LoopEvent(
             kind="observed", step=self.reported,
-            detail=("as expected" if not off and ok and not unconfirmed else
+            detail=("as expected" if not off and ok and not unconfirmed and not refereed else
                     "; ".join(([f"the step failed: {clip(failure or 'no reason', 160)}"]
                                if not ok else []) + off[:4] +
                               ([f"{oid} was not where a look had put it: believed where it "
                                 "was before"] if recalled else []) +
                               ([f"a second look did not confirm {', '.join(unconfirmed[:4])}: "
-                                "believed where it was"] if unconfirmed else []))),
+                                "believed where it was"] if unconfirmed else []) +
+                              ([f"the image fits {', '.join(refereed[:4])} better where believed:"
+                                " believed there"] if refereed else []))),
         ))  # fmt: skip
         if ok and not off:
             self._repeated = None
@@ -316,6 +329,29 @@ class ClosedLoop:
                 t, _ = se3.pose_error(T2, T, self._symmetries(mesh))
                 unconfirmed.append(f"{oid} ({1000 * t:.0f} mm from the first)")
         return kept, unconfirmed
+
+    def _refereed(self, observation: Mapping[str, Any], seen: Any) -> tuple[Any, list[str]]:
+        """`seen` without the records the referee finds better explained at their believed
+        poses, and those records' ids (nothing changes without a referee, or when the look
+        moves nothing believed)."""
+        if self.referee is None or not isinstance(seen, list):
+            return seen, []
+        moved: dict[str, np.ndarray] = {}
+        for r in seen:
+            away = self._away(r)
+            if away is not None and away[0] in self.belief:
+                moved[away[0]] = self.belief[away[0]]
+        if not moved:
+            return seen, []
+
+        def oid(r: Any) -> str:
+            return str(r.get("id")) if isinstance(r, Mapping) else ""
+
+        alternative = [
+            {**r, "pose": moved[oid(r)].tolist()} if oid(r) in moved else r for r in seen
+        ]
+        better = {str(i) for i in self.referee(observation, seen, alternative)} & moved.keys()
+        return [r for r in seen if oid(r) not in better], sorted(better)
 
     def _agree(self, oid: str, T: np.ndarray, T2: np.ndarray, mesh: str) -> bool:
         """Whether two looks agree on an object: within the scoring tolerance of each other,

@@ -450,6 +450,9 @@ def run_trial(
                     judge=functools.partial(policy.look_problems, domain)
                     if callable(getattr(policy, "look_problems", None))
                     else None,
+                    referee=functools.partial(policy.look_prefers_belief, domain)
+                    if callable(getattr(policy, "look_prefers_belief", None))
+                    else None,
                 ),
                 believed_start,
                 out.goal_state,
