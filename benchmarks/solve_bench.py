@@ -4,17 +4,26 @@ trials of each domain's dev benchmark that has frozen artifacts, in a Docker san
 time of the calls (measured outside the programs, what the online budget limits), wall time of
 the calls, and the round trip with the sandbox's transfers; and the solve's overhead beyond the
 programs' own CPU — round trip minus the five calls' CPU, and their ratio — the median over the
-trials (target: at most 100 ms)."""
+trials (target: at most 100 ms).
+
+    python -m benchmarks.solve_bench [--trials N]   (default 12; 60: the whole dev split)
+"""
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import sys
 
 N = 12
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.solve_bench", description=__doc__)
+    p.add_argument("--trials", type=int, default=N, help="the dev split's first N trials")
+    args = p.parse_args(argv)
+    if args.trials < 1:
+        p.error("--trials must be at least 1")
     import domains
     import sandbox
     from artifacts import ArtifactError, load
@@ -32,7 +41,7 @@ def main() -> int:
             round_trip = []
             overhead, ratio = [], []
             with system.runner(executor) as run:
-                for inst in d.benchmark()[:N]:
+                for inst in d.benchmark()[: args.trials]:
                     start = observe(d, inst.start, "front", seed=1)
                     goal = observe(d, inst.goal, "front", seed=2)
                     run.solve(start, goal)
