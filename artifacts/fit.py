@@ -212,12 +212,8 @@ def better_explained(
 ) -> list[str]:
     """The ids of the objects whose pose in `alternative` explains `observation` better than
     their pose in `records` (the same objects; some at other poses): what the closed loop asks
-    before a look moves a belief (`sim.loop.ClosedLoop`'s referee).
-
-    An object is better explained at its `alternative` pose when it is judged there (enough
-    visible pixels) and fits there (`SUPPORT_MIN`, `RESIDUAL_MAX_M`), and at its `records` pose
-    it is hidden, lacks support, or its residual is over `PREFER_MARGIN_M` larger. Where it
-    is hidden at its `alternative` pose, the image says nothing for it: not preferred."""
+    before a look moves a belief (`sim.loop.ClosedLoop`'s referee, with the look as `records`
+    and the belief as `alternative`). Each changed object is judged by `prefers`."""
     changed = {
         str(a["id"])
         for a, b in zip(records, alternative, strict=True)
@@ -227,22 +223,34 @@ def better_explained(
         return []
     ours = {o.id: o for o in scene_fit(domain, observation, records, render).objects}
     theirs = {o.id: o for o in scene_fit(domain, observation, alternative, render).objects}
-    out = []
-    for i in sorted(changed):
-        there, here = theirs.get(i), ours.get(i)
-        if there is None or there.support is None or there.residual_m is None:
-            continue  # hidden where the alternative puts it
-        if there.support < SUPPORT_MIN or there.residual_m > RESIDUAL_MAX_M:
-            continue  # the alternative does not explain its pixels either
-        if (
-            here is None
-            or here.support is None
-            or here.residual_m is None
-            or here.support < SUPPORT_MIN
-            or here.residual_m > there.residual_m + PREFER_MARGIN_M
-        ):
-            out.append(i)
-    return out
+    return [i for i in sorted(changed) if prefers(theirs.get(i), ours.get(i))]
+
+
+def prefers(there: ObjectFit | None, here: ObjectFit | None) -> bool:
+    """Whether an object's fit `there` (at its alternative pose) explains the image better than
+    its fit `here`; None, or no support, where it is hidden.
+
+    - Judged `there` (enough visible pixels) and fitting there (`SUPPORT_MIN`,
+      `RESIDUAL_MAX_M`): better when, `here`, it is hidden, lacks support, or its residual is
+      over `PREFER_MARGIN_M` larger.
+    - Hidden `there`, the image says nothing for that pose: better only when `here` is judged
+      and contradicted — the pixels where `here` puts the object show something else (it lacks
+      support or its residual is over `RESIDUAL_MAX_M`). A reading the image refutes does not
+      beat one it cannot see.
+    - Judged `there` and not fitting: never better."""
+    t, h = _judged(there), _judged(here)
+    if t is None:
+        return h is not None and (h[0] < SUPPORT_MIN or h[1] > RESIDUAL_MAX_M)
+    if t[0] < SUPPORT_MIN or t[1] > RESIDUAL_MAX_M:
+        return False
+    return h is None or h[0] < SUPPORT_MIN or h[1] > t[1] + PREFER_MARGIN_M
+
+
+def _judged(fit: ObjectFit | None) -> tuple[float, float] | None:
+    """(support, residual [m]) of an object the image shows enough of to judge; else None."""
+    if fit is None or fit.support is None or fit.residual_m is None:
+        return None
+    return fit.support, fit.residual_m
 
 
 def _eroded(mask: np.ndarray, px: int) -> np.ndarray:

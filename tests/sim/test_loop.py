@@ -557,6 +557,40 @@ def test_the_frozen_sets_referee_tells_a_misreading_from_a_move():
         policy.close()
 
 
+@pytest.mark.slow
+def test_the_frozen_sets_referee_keeps_a_hidden_belief_against_a_refuted_reading():
+    """A dev-side composed cubes scene through a low envelope camera (the scene after step 6
+    of composed/seed5010): `perceive` reads blue 40 mm off, where the image shows something
+    else, and blue's true pose is hidden behind the tower. The image cannot show the belief,
+    but it refutes the reading: the belief is kept."""
+    import zlib
+
+    from benchmarks.loop_looks import scenes_of
+    from sim.observation import load_camera, observe
+
+    domain = domains.load("cubes")
+    instance = domain.composed_instance(5010)
+    assert instance is not None
+    scene = scenes_of(instance)[6]
+    camera = load_camera(REPO / "docs" / "cameras" / "envelope-1.json")
+    obs = observe(domain, {"domain": "cubes", **scene}, camera, realism="default",
+                  seed=zlib.crc32(b"composed/seed5010/6/0/s"),
+                  calibration_seed=zlib.crc32(b"composed/seed5010/camera"))  # fmt: skip
+    policy = ProgramPolicy(load("cubes"), "artifacts", sandbox="local")
+    try:
+        seen = policy.runner().perceive(obs)
+        truth = {o["id"]: np.asarray(o["pose"], float) for o in scene["objects"]}
+        read = next(np.asarray(r["pose"], float) for r in seen if r["id"] == "blue")
+        off = float(np.linalg.norm(read[:3, 3] - truth["blue"][:3, 3]))
+        assert off > 0.03, f"the draw no longer shows the misreading ({1000 * off:.0f} mm)"
+        believed = [{**r, "pose": truth["blue"].tolist()} if r["id"] == "blue" else r for r in seen]
+        fits = {o.id: o for o in scene_fit(domain, obs, believed, policy.runner().render).objects}
+        assert fits["blue"].support is None, "blue's true pose is no longer hidden in this draw"
+        assert "blue" in policy.look_prefers_belief(domain, obs, seen, believed)
+    finally:
+        policy.close()
+
+
 def test_a_slip_is_judged_for_topples_once_the_part_came_to_rest():
     """The slip fault records the parts' rotations as the hand lets go; `SETTLE_S` of sim time
     later (at the next phase the executor reports), or at the trial's end, it says which parts
