@@ -7,10 +7,15 @@ For a domain's hand-written reference programs (`domains/<domain>/programs/`):
   checked once: it must be rejected; the table says by which check.
 Targets (issues 6, 16): in each domain at least 95 % of mutants rejected, zero rejections
 of the correct programs.
+- every program from the field in `--field DIR` (default ../shared/field, read in place:
+  model-written drafts that passed the checks of their day and failed in trials, named
+  `<domain>_<function>_<what>.py`) is checked on `--field-draws` fresh draws: the table says
+  on how many it was rejected, and a case it got wrong on each.
 
 Usage:
     python -m benchmarks.checks_bench [--domain all|cubes|tangram|assembly] [--repeats 10]
         [--sandbox docker|local] [--only NAME[,NAME…]] [--seed S] [--out DIR]
+        [--field DIR] [--field-draws N]
 Every mutant's check draws its cases afresh (`checks.inputs`); the repeats of a correct
 program share one draw, so that their reports can be compared. `--seed S` draws every check's
 cases from S instead; each row records the seed its cases came from (`cases_seed`), so
@@ -44,6 +49,7 @@ from contracts.functions import FUNCTIONS
 
 REPO = Path(__file__).resolve().parent.parent
 TARGET_CAUGHT = 0.95
+FIELD = REPO.parent / "shared" / "field"  # programs from the field, read in place
 
 
 class CatalogueError(Exception):
@@ -62,6 +68,19 @@ class Mutant:
 def programs(domain: str) -> dict[str, str]:
     folder = REPO / "domains" / domain / "programs"
     return {f: (folder / f"{f}.py").read_text() for f in FUNCTIONS}
+
+
+def field_programs(folder: Path | None, domain: str) -> list[tuple[str, str, Path]]:
+    """(name, function, path) of `domain`'s programs from the field in `folder`
+    (`<domain>_<function>_<what>.py`); none where the folder is not there."""
+    if folder is None or not folder.is_dir():
+        return []
+    out = []
+    for path in sorted(folder.glob(f"{domain}_*.py")):
+        function = path.stem[len(domain) + 1 :].split("_", 1)[0]
+        if function in FUNCTIONS:
+            out.append((path.stem, function, path))
+    return out
 
 
 def catalogue(domain: str) -> Path:
@@ -235,7 +254,19 @@ def main(argv: list[str] | None = None) -> int:
         "--seed", type=int, default=None, help="draw every check's cases from this seed"
     )
     parser.add_argument("--out", type=Path, default=REPO / "runs" / "bench-checks")
+    parser.add_argument(
+        "--field",
+        type=Path,
+        default=FIELD,
+        help="folder of programs from the field, <domain>_<function>_<what>.py (default "
+        "../shared/field; read in place)",
+    )
+    parser.add_argument(
+        "--field-draws", type=int, default=5, help="fresh draws per field program (0: none)"
+    )
     args = parser.parse_args(argv)
+    if args.repeats < 0 or args.field_draws < 0:
+        parser.error("--repeats and --field-draws take a count ≥ 0")
     args.argv = list(sys.argv[1:] if argv is None else argv)  # for each summary's "run"
 
     import sandbox
@@ -353,6 +384,7 @@ def bench_domain(
             f"cases seed {report.get('cases_seed')})",
             flush=True,
         )
+    field_rows = [] if only else bench_field(domain, refs, args, ex, out, times)
     caught = sum(r["caught"] for r in mutant_rows)
     rate = caught / len(mutant_rows) if mutant_rows else 1.0
     false_rejections = sum(r["rejections"] for r in correct_rows)
@@ -367,6 +399,9 @@ def bench_domain(
         "correct_runs": sum(r["runs"] for r in correct_rows),
         "false_rejections": false_rejections,
         "all_reports_identical": all(r["identical_reports"] for r in correct_rows),
+        "field": [
+            {k: r[k] for k in ("program", "function", "draws", "rejected")} for r in field_rows
+        ],
         "seconds_per_check_median": round(statistics.median(times), 1) if times else None,
         "seconds_per_check_max": round(max(times), 1) if times else None,
         "wall_s": round(time.perf_counter() - t_start, 1),
@@ -374,14 +409,74 @@ def bench_domain(
         "run": run_record(args.argv, program=("python", "-m", "benchmarks.checks_bench")),
     }
     (out / "bench_checks.json").write_text(
-        json.dumps({"summary": summary, "correct": correct_rows, "mutants": mutant_rows}, indent=1)
+        json.dumps(
+            {
+                "summary": summary,
+                "correct": correct_rows,
+                "mutants": mutant_rows,
+                "field": field_rows,
+            },
+            indent=1,
+        )
     )
-    md = render_markdown(summary, correct_rows, mutant_rows)
+    md = render_markdown(summary, correct_rows, mutant_rows, field_rows)
     (out / "bench_checks.md").write_text(md)
     print()
     print(md)
     good = rate >= TARGET_CAUGHT and false_rejections == 0 and summary["all_reports_identical"]
     return summary, good
+
+
+def bench_field(
+    domain: str, refs: dict[str, str], args: argparse.Namespace, ex: Any, out: Path, times: list
+) -> list[dict[str, Any]]:
+    """Each of `domain`'s programs from the field (`field_programs`) checked on
+    `args.field_draws` draws (fresh ones, or `--seed S`, S+1, …): one row per program."""
+    from checks.inputs import fresh_seed
+
+    rows = []
+    for name, function, path in field_programs(args.field, domain):
+        draws = []
+        for k in range(args.field_draws):
+            seed = fresh_seed() if args.seed is None else args.seed + k
+            report, dt = check(
+                domain, function, path.read_text(), refs, ex, out / "images" / name, seed
+            )
+            times.append(dt)
+            draws.append(
+                {
+                    "cases_seed": seed,
+                    "rejected": not report["passed"],
+                    "first_failure": report["first_failure"],
+                    "case": _first_case(report),
+                    "seconds": round(dt, 1),
+                }
+            )
+            print(
+                f"{domain} field {name} draw {k + 1}/{args.field_draws}: "
+                f"{'REJECTED by ' + str(report['first_failure']) if not report['passed'] else 'pass'}"
+                f" ({dt:.1f} s, cases seed {seed})",
+                flush=True,
+            )
+        rows.append(
+            {
+                "program": name,
+                "function": function,
+                "path": str(path),
+                "draws": len(draws),
+                "rejected": sum(d["rejected"] for d in draws),
+                "draw_rows": draws,
+            }
+        )
+    return rows
+
+
+def _first_case(report: dict) -> str | None:
+    """The first line of what the first failing check found: it names the case."""
+    for c in report["checks"]:
+        if c["name"] == report["first_failure"] and c.get("message"):
+            return str(c["message"]).splitlines()[0][:300]
+    return None
 
 
 def render_totals(summaries: list[dict]) -> str:
@@ -390,20 +485,23 @@ def render_totals(summaries: list[dict]) -> str:
         "# Checks mutation benchmark: every domain",
         "",
         "| domain | mutants | rejected | correct runs | false rejections | identical reports "
-        "| wall time | caught first by |",
-        "|---|---|---|---|---|---|---|---|",
+        "| wall time | caught first by | from the field: rejected draws |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for s in summaries:
         by = ", ".join(f"`{k}` {v}" for k, v in s["caught_by_first"].items())
+        field = "; ".join(f"{f['program']} {f['rejected']}/{f['draws']}" for f in s["field"])
         lines.append(
             f"| {s['domain']} | {s['mutants']} | {s['caught']} ({100 * s['caught_rate']:.1f} %) "
             f"| {s['correct_runs']} | {s['false_rejections']} | {s['all_reports_identical']} "
-            f"| {s['wall_s']:.0f} s | {by} |"
+            f"| {s['wall_s']:.0f} s | {by} | {field or '–'} |"
         )
     return "\n".join(lines) + "\n"
 
 
-def render_markdown(summary: dict, correct: list[dict], mutants: list[dict]) -> str:
+def render_markdown(
+    summary: dict, correct: list[dict], mutants: list[dict], field: list[dict] | None = None
+) -> str:
     lines = [
         f"# Checks mutation benchmark ({summary['domain']}, sandbox {summary['sandbox']})",
         "",
@@ -438,6 +536,18 @@ def render_markdown(summary: dict, correct: list[dict], mutants: list[dict]) -> 
             f"| {r['mutant']} | {r['function']} | {r['bug']} | {first} | "
             f"{', '.join(r['failing'])} |"
         )
+    if field:
+        lines += [
+            "",
+            "| program from the field | function | rejected draws | a case it got wrong |",
+            "|---|---|---|---|",
+        ]
+        for r in field:
+            case = next((d["case"] for d in r["draw_rows"] if d["case"]), None)
+            lines.append(
+                f"| {r['program']} | {r['function']} | {r['rejected']} of {r['draws']} "
+                f"| {case or '–'} |"
+            )
     return "\n".join(lines) + "\n"
 
 

@@ -180,6 +180,13 @@ def compact_checks(bench: Mapping) -> dict:
             {k: r[k] for k in ("mutant", "function", "caught", "first_failure", "seconds")}
             for r in bench["mutants"]
         ],
+        "field": [
+            {
+                **{k: r[k] for k in ("program", "function", "draws", "rejected")},
+                "case": next((d["case"] for d in r["draw_rows"] if d["case"]), None),
+            }
+            for r in bench.get("field", [])
+        ],
     }
 
 
@@ -513,16 +520,18 @@ def _checks_benchmark(got: Files, names: Sequence[str]) -> list[str]:
         "Each reference program checked 10 times on one fresh draw (none may be rejected, the",
         "reports must be identical) and each mutant of the domain's catalogue, a realistic bug",
         'planted in a reference program, checked once on fresh draws (docs/checks.md, "Mutation',
-        'benchmark"). Run files `checks-D`.',
+        'benchmark"). A program from the field (a model-written draft that passed the checks',
+        "of its day and failed in trials, ../shared/field) is checked on 5 fresh draws. Run",
+        "files `checks-D`.",
         "",
         "| domain | mutants rejected | correct programs rejected | identical reports |"
-        " one check, median / max | missed |",
-        "|---|---|---|---|---|---|",
+        " one check, median / max | missed | from the field: rejected draws |",
+        "|---|---|---|---|---|---|---|",
     ]
     for d in names:
         bench = got[f"checks-{d}"]
         if bench is None:
-            out.append(f"| {d} | not run | | | | |")
+            out.append(f"| {d} | not run | | | | | |")
             continue
         b = bench["summary"]
         low, high = wilson(b["caught"], b["mutants"]) or (0.0, 1.0)
@@ -534,8 +543,24 @@ def _checks_benchmark(got: Files, names: Sequence[str]) -> list[str]:
         out.append(
             f"| {d} | {rejected} | {b['false_rejections']} of {b['correct_runs']} runs | "
             f"{'yes' if b['all_reports_identical'] else 'no'} | {b['seconds_per_check_median']} / "
-            f"{b['seconds_per_check_max']} s | {missed or 'none'} |"
+            f"{b['seconds_per_check_max']} s | {missed or 'none'} | "
+            + (
+                "; ".join(
+                    f"`{f['program']}` {f['rejected']} of {f['draws']}"
+                    for f in bench.get("field", [])
+                )
+                or "none"
+            )
+            + " |"
         )
+    cases = [
+        f"- `{f['program']}`: {f['case']}"
+        for d in names
+        for f in (got[f"checks-{d}"] or {}).get("field", [])
+        if f.get("case")
+    ]
+    if cases:
+        out += ["", "A case each program from the field got wrong:", "", *cases]
     return out
 
 

@@ -183,3 +183,15 @@ def test_a_mutant_anchored_on_a_function_looks_only_there():
     assert out == "def g(x):\n    y = x - 1\n    return h(y, 1)\n"
     with pytest.raises(CatalogueError, match="0 functions named 'h'"):
         replace_once(source, "return x + 1", "return x - 1", within="h")
+
+
+def test_programs_from_the_field_are_found_by_domain_and_function(tmp_path):
+    from benchmarks.checks_bench import field_programs
+
+    for name in ("cubes_perceive_run1.py", "cubes_plan_x.py", "cubes_nothing_x.py",
+                 "tangram_perceive_a.py", "cubes_perceive_notes.txt"):  # fmt: skip
+        (tmp_path / name).write_text("")
+    found = [(n, f) for n, f, _ in field_programs(tmp_path, "cubes")]
+    assert found == [("cubes_perceive_run1", "perceive"), ("cubes_plan_x", "plan")]
+    assert field_programs(tmp_path / "absent", "cubes") == []
+    assert field_programs(None, "cubes") == []

@@ -134,13 +134,32 @@ def test_a_checks_benchmark_is_kept_and_shown_with_its_interval_and_missed_mutan
             }
             for m, c in (("a", True), ("b", True), ("plan_missed", False))
         ],
+        "field": [
+            {
+                "program": "cubes_perceive_run1",
+                "function": "perceive",
+                "path": "/somewhere/cubes_perceive_run1.py",
+                "draws": 5,
+                "rejected": 3,
+                "draw_rows": [
+                    {"cases_seed": 7, "rejected": False, "case": None},
+                    {"cases_seed": 8, "rejected": True, "case": "perceive is wrong on obs19"},
+                ],
+            }
+        ],
     }
     results.write("checks-cubes", bench, tmp_path)
     kept = json.loads((tmp_path / "checks-cubes.json").read_text())
     assert "bug" not in kept["mutants"][0] and kept["summary"]["run"] == run
+    assert kept["field"] == [
+        {"program": "cubes_perceive_run1", "function": "perceive", "draws": 5, "rejected": 3,
+         "case": "perceive is wrong on obs19"}
+    ]  # fmt: skip
     page = results.render(tmp_path, names=["cubes"])
     (row,) = [line for line in page.splitlines() if line.startswith("| cubes | 2/3")]
     assert "66.7 % (20.8–93.9)" in row and "`plan_missed`" in row and "0 of 40 runs" in row
+    assert row.endswith("| `cubes_perceive_run1` 3 of 5 |")
+    assert "- `cubes_perceive_run1`: perceive is wrong on obs19" in page
     assert "| checks-cubes | `python -m benchmarks.checks_bench --domain cubes" in page
     assert "| 2026-12-06 12:00 | 0123456789ab | – | 10.0 min |" in page
 

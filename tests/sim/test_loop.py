@@ -547,11 +547,12 @@ def test_the_frozen_sets_referee_tells_a_misreading_from_a_move():
         def poses(records, **at):
             return [{**r, "pose": at.get(r["id"], r["pose"])} for r in records]
 
-        misread = poses(seen, **{oid: shifted(truth[oid]).tolist()})
+        off = poses(seen, **{oid: shifted(truth[oid]).tolist()})
         believed = poses(seen, **{oid: truth[oid].tolist()})
-        assert policy.look_prefers_belief(domain, obs, misread, believed) == [oid]
-        moved_away = poses(seen, **{oid: shifted(truth[oid]).tolist()})
-        assert policy.look_prefers_belief(domain, obs, seen, moved_away) == []
+        # a look that reads it 40 mm off, against a belief where it stands: the belief
+        assert policy.look_prefers_belief(domain, obs, off, believed) == [oid]
+        # a look that reads it where it stands, against a belief 40 mm off: the look
+        assert policy.look_prefers_belief(domain, obs, seen, off) == []
         assert policy.look_prefers_belief(domain, obs, seen, seen) == []
     finally:
         policy.close()
