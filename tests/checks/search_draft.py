@@ -33,9 +33,17 @@ import numpy as np
 
 ROW64 = struct.pack("<4d", 0.0, 0.0, 0.0, 1.0)
 ROW32 = struct.pack("<4f", 0.0, 0.0, 0.0, 1.0)
-TEXT = re.compile(
-    rb"\[\s*0(?:\.0+)?\s*,\s*0(?:\.0+)?\s*,\s*0(?:\.0+)?\s*,\s*1(?:\.0+)?\s*\]|\"pose\"|xyz_m"
+# the text signatures, one pattern each: each starts with a literal, which `re` searches for
+# about four times faster than it scans for an alternation's first characters
+TEXT = tuple(
+    re.compile(p)
+    for p in (
+        rb"\[\s*0(?:\.0+)?\s*,\s*0(?:\.0+)?\s*,\s*0(?:\.0+)?\s*,\s*1(?:\.0+)?\s*\]",
+        rb"\"pose\"",
+        rb"xyz_m",
+    )
 )
+SNIPPETS_PER_SCAN = 64
 WRITABLE = ("/in", "/tmp", "/dev/shm", "/dev/mqueue")
 OURS = ("/opt/rivet", "/etc", "/run", "/var/tmp", "/home", "/root", "/mnt", "/srv")
 MAX_VERBATIM = 1 << 20  # [bytes] of one file kept as it is
@@ -101,8 +109,14 @@ class Dump:
                         out.append(head.reshape(12))
         if not text:
             return
-        for k, m in enumerate(TEXT.finditer(raw)):
-            if len(self.snippets) >= MAX_SNIPPETS or k >= 64:
+        found: list[re.Match] = []
+        for pattern in TEXT:  # the signatures cannot overlap: the first ones by position
+            for k, m in enumerate(pattern.finditer(raw)):
+                if k >= SNIPPETS_PER_SCAN:
+                    break
+                found.append(m)
+        for m in sorted(found, key=lambda m: m.start())[:SNIPPETS_PER_SCAN]:
+            if len(self.snippets) >= MAX_SNIPPETS:
                 break
             self.snippets += raw[max(0, m.start() - 600) : m.end() + 600] + b"\n--\n"
 
