@@ -198,18 +198,22 @@ class Renderer:
         gl.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = not quick
         gl.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = not quick
         out = {"rgb": gl.render().copy()}
+        seg = None
         if depth:
             gl.enable_depth_rendering()
             gl.update_scene(data, camera=self._cam, scene_option=self._option)
             z = gl.render().astype(np.float32)
             gl.disable_depth_rendering()
+            if mask:  # the same pass drew the segment ids: a depth render sets their flags
+                seg = _segments_drawn(gl)
             z[z >= 0.99 * self.model.vis.map.zfar * self.model.stat.extent] = 0.0
             out["depth"] = z
         if mask:
-            gl.enable_segmentation_rendering()
-            gl.update_scene(data, camera=self._cam, scene_option=self._option)
-            seg = gl.render()
-            gl.disable_segmentation_rendering()
+            if seg is None:
+                gl.enable_segmentation_rendering()
+                gl.update_scene(data, camera=self._cam, scene_option=self._option)
+                seg = gl.render()
+                gl.disable_segmentation_rendering()
             index = {i: k for k, i in enumerate(mask_ids or [])}
             lut = np.full(self.model.ngeom + 1, -1, np.int32)
             for g, oid in self._geom_object.items():
@@ -220,6 +224,27 @@ class Renderer:
                 is_geom & (ids >= 0), lut[np.clip(ids, 0, self.model.ngeom)], -1
             ).astype(np.int32)
         return out
+
+
+def _segments_drawn(gl: mujoco.Renderer) -> np.ndarray:
+    """(H, W, 2) (object id, object type) of each pixel, -1 for none, read from the colour
+    buffer of the pass `gl` drew last — one drawn with `mjRND_SEGMENT` and `mjRND_IDCOLOR`, as
+    a depth or a segmentation render is: the segmentation render's output for that pass
+    (`tests/sim/test_observation.py` holds them equal), without drawing it again."""
+    h, w = gl.height, gl.width
+    rgb = np.empty((h, w, 3), np.uint8)
+    # mujoco.Renderer keeps its context and viewport private (tests/sim/test_observation.py)
+    mujoco.mjr_readPixels(rgb, None, gl._rect, gl._mjr_context)
+    if gl._gl_context:  # EGL and OSMesa draw bottom-up
+        rgb = np.flipud(rgb)
+    rgb32 = rgb.astype(np.uint32)
+    segid = rgb32[..., 0] + (rgb32[..., 1] << 8) + (rgb32[..., 2] << 16)  # 0: background
+    scene = gl.scene
+    lut = np.full((scene.ngeom + 1, 2), -1, np.int32)
+    for g in scene.geoms[: scene.ngeom]:
+        if g.segid != -1:
+            lut[g.segid + 1] = (g.objid, g.objtype)
+    return lut[segid]
 
 
 _RENDERERS: OrderedDict[tuple, Renderer] = OrderedDict()

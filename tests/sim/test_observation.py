@@ -111,3 +111,31 @@ def test_cameras_mujoco_cannot_render_are_refused():
     cam["K"][0, 2] += 20
     with pytest.raises(InvalidCameraError, match="principal point"):
         observe(d, inst.goal, cam)
+
+
+def test_one_pass_gives_the_depth_and_the_mask_of_two(reference):
+    """With a mask, the depth pass's colour buffer gives the segmentation (`_segments_drawn`):
+    the same depth and mask, byte for byte, as a depth pass and a segmentation pass apart —
+    and the same pass of a segmentation render."""
+    from sim.observation import _segments_drawn, renderer_for
+    from sim.scene import scene_model
+
+    d, inst = reference
+    sm = scene_model(d, inst.goal)
+    cam = d.camera("view1")
+    r = renderer_for(sm.model, cam["width"], cam["height"])
+    ids = [o["id"] for o in inst.goal["objects"]]
+    both = r.render(sm.data, cam, depth=True, mask=True, mask_ids=ids)
+    depth = r.render(sm.data, cam, depth=True, mask=False)
+    mask = r.render(sm.data, cam, depth=False, mask=True, mask_ids=ids)  # a pass of its own
+    assert np.array_equal(both["depth"], depth["depth"])
+    assert np.array_equal(both["mask"], mask["mask"])
+    assert np.array_equal(both["rgb"], mask["rgb"])
+    assert set(np.unique(both["mask"])) - {-1} == set(range(len(ids)))
+    gl = r._gl
+    gl.enable_segmentation_rendering()
+    try:
+        seg = gl.render()  # the scene the last pass drew, drawn again as a segmentation
+    finally:
+        gl.disable_segmentation_rendering()
+    assert np.array_equal(_segments_drawn(gl), seg)
