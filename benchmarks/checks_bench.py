@@ -465,6 +465,7 @@ def bench_field(
                 "path": str(path),
                 "draws": len(draws),
                 "rejected": sum(d["rejected"] for d in draws),
+                "case": next((d["case"] for d in draws if d["case"]), None),
                 "draw_rows": draws,
             }
         )
@@ -542,12 +543,11 @@ def render_markdown(
             "| program from the field | function | rejected draws | a case it got wrong |",
             "|---|---|---|---|",
         ]
-        for r in field:
-            case = next((d["case"] for d in r["draw_rows"] if d["case"]), None)
-            lines.append(
-                f"| {r['program']} | {r['function']} | {r['rejected']} of {r['draws']} "
-                f"| {case or '–'} |"
-            )
+        lines += [
+            f"| {r['program']} | {r['function']} | {r['rejected']} of {r['draws']} "
+            f"| {r['case'] or '–'} |"
+            for r in field
+        ]
     return "\n".join(lines) + "\n"
 
 

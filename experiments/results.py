@@ -181,10 +181,7 @@ def compact_checks(bench: Mapping) -> dict:
             for r in bench["mutants"]
         ],
         "field": [
-            {
-                **{k: r[k] for k in ("program", "function", "draws", "rejected")},
-                "case": next((d["case"] for d in r["draw_rows"] if d["case"]), None),
-            }
+            {k: r[k] for k in ("program", "function", "draws", "rejected", "case")}
             for r in bench.get("field", [])
         ],
     }

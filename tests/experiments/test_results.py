@@ -141,6 +141,7 @@ def test_a_checks_benchmark_is_kept_and_shown_with_its_interval_and_missed_mutan
                 "path": "/somewhere/cubes_perceive_run1.py",
                 "draws": 5,
                 "rejected": 3,
+                "case": "perceive is wrong on obs19",
                 "draw_rows": [
                     {"cases_seed": 7, "rejected": False, "case": None},
                     {"cases_seed": 8, "rejected": True, "case": "perceive is wrong on obs19"},
