@@ -21,7 +21,15 @@
    apart, and a part that would float or tip over must stand on something the camera cannot
    see: an unseen part of the right height is put under it (mirroring the visible one for a
    beam or an arch on two pillars). A part that is not seen and not needed to hold anything up
-   is left out: it is reported missing rather than invented.
+   is put where the camera cannot see it: behind a seen part, on the table, clear of the
+   others (the task text: all eight are reported; where exactly is not scored).
+5. Render-and-compare (`toolbox.refine_poses`): the seen parts are drawn together, so they hide
+   each other, and moved until the drawing matches their colour segments and the depth. A part
+   the refined drawing explains (`PoseFit.good`) takes the refined pose; a quarter turn of it is
+   taken only when the part's own heading explains its segment badly and the part shows enough
+   of itself for a turn to be judged. A part whose drawing
+   does not explain its segment is searched again from the centre of its points (the ICP's
+   pose can sit a part-length off, turned); a part still not explained keeps its pose.
 """
 
 import hashlib
@@ -31,7 +39,16 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from toolbox import Shape, collisions, separation, stable_poses, supports, unstable_objects
+from toolbox import (
+    Shape,
+    collisions,
+    refine_poses,
+    render_scene,
+    separation,
+    stable_poses,
+    supports,
+    unstable_objects,
+)
 from toolbox.vision import level_camera_on_table
 
 PARTS = {  # id → (mesh key, hue of its colour as rendered [deg])
@@ -73,6 +90,11 @@ FINE_ITERATIONS = 8
 GRID_CELL = 0.0025  # [m]
 GRID_MARGIN = 0.025  # [m]
 NEIGHBOURS = 6
+TURN_EVIDENCE = 0.1  # refiner cost above which the part's own heading is taken as wrong
+TURN_PIXELS = 50  # working pixels (`PoseFit.pixels`) a part must show for a turn to be judged
+RESEARCH_SHIFT = 0.06  # [m] how far a part searched again may move from its points' centre
+BEHIND = (0.05, 0.08, 0.11, 0.15)  # [m] from a seen part, away from the camera: hiding spots
+SIGHT_SCALE = 4  # the hiding spot is tested on the image reduced this many times
 BOX_MARGIN = 4  # [px] around a part's pixels: its morphology sees nothing beyond
 
 _CACHE = {}
@@ -606,6 +628,40 @@ def _hidden_supporters(poses, shapes, models, missing, pixels):
     return poses
 
 
+def _out_of_sight(poses, shapes, models, missing, pixels, camera, meshes):
+    """Unseen parts that hold nothing up, each put upright on the table behind a seen part
+    (most visible first), where a drawing of the scene shows none of it and it touches
+    nothing; a part with no such spot is left out."""
+    eye = np.asarray(camera["T_world_camera"], float)[:3, 3]
+    small = {
+        "width": int(camera["width"]) // SIGHT_SCALE,
+        "height": int(camera["height"]) // SIGHT_SCALE,
+        "K": np.diag([1 / SIGHT_SCALE, 1 / SIGHT_SCALE, 1.0]) @ np.asarray(camera["K"], float),
+        "T_world_camera": camera["T_world_camera"],
+    }
+    poses = dict(poses)
+    for m in missing:
+        model = models[m]
+        placed = False
+        for j in sorted(pixels, key=lambda k: (-pixels[k], k)):
+            away = poses[j][:2, 3] - eye[:2]
+            away /= max(float(np.linalg.norm(away)), 1e-9)
+            R = _rz(float(np.arctan2(away[1], away[0]))) @ model.rests[0]
+            for d in BEHIND:
+                xy = poses[j][:2, 3] + d * away
+                trial = {**poses, m: _pose(R, [xy[0], xy[1], -model.lowest[0]])}
+                recs = _records(trial)
+                if any(m in (a, b) for a, b, _ in collisions(recs, shapes, tolerance=0.001)):
+                    continue
+                seen = render_scene(recs, meshes, small)["mask"]
+                if not (seen == [r["id"] for r in recs].index(m)).any():
+                    poses, placed = trial, True
+                    break
+            if placed:
+                break
+    return poses
+
+
 def _conflicts(poses, shapes, pixels, missing_heights, moves):
     """Parts whose pose cannot be right: the less visible of two interpenetrating parts, of a
     part and what it had to be moved far onto, and a part floating where no unseen part could
@@ -684,6 +740,38 @@ def _choose(parts, shapes, missing_heights):
     return poses
 
 
+def _refined(observation, meshes, camera, poses, parts, labels):
+    """Step 5: the seen parts' poses refined by render-and-compare where that explains the
+    image better (see the module docstring)."""
+    ids = [i for i in PARTS if i in poses]
+    records = [{"id": i, "mesh": PARTS[i][0], "pose": poses[i]} for i in ids]
+    segments = {i: labels == k for k, i in enumerate(PARTS) if i in parts}
+    fits = refine_poses(observation, meshes, records, camera=camera, segments=segments)
+    out = dict(poses)
+    for i, fit in zip(ids, fits, strict=True):
+        own = dict(fit.hypotheses).get("given", 1.0)
+        turn_shown = own > TURN_EVIDENCE and fit.pixels >= TURN_PIXELS
+        if fit.good and (fit.hypothesis == "given" or turn_shown):
+            out[i] = fit.pose
+    for k, (i, fit) in enumerate(zip(ids, fits, strict=True)):
+        if fit.good or fit.pixels == 0:
+            continue
+        start = poses[i].copy()
+        start[:2, 3] = parts[i].pts[:, :2].mean(axis=0)
+        again = [{**r, "pose": start if r["id"] == i else out[r["id"]]} for r in records]
+        other = refine_poses(
+            observation,
+            meshes,
+            again,
+            camera=camera,
+            segments={i: segments[i]},
+            max_shift=RESEARCH_SHIFT,
+        )[k]
+        if other.good and other.cost < fit.cost:
+            out[i] = other.pose
+    return out
+
+
 def perceive(observation, meshes, camera):
     rgb = np.asarray(observation["rgb"], dtype=np.uint8)
     depth = np.asarray(observation["depth"], dtype=np.float32)
@@ -715,9 +803,12 @@ def perceive(observation, meshes, camera):
     heights = [models[m].highest[0] - models[m].lowest[0] for m in missing]
     poses = _choose(parts, shapes, heights)
     poses = _push_apart(poses, shapes, {i: p.pixels for i, p in parts.items()})
+    poses = _refined(observation, meshes, camera, poses, parts, labels)
     if missing:
         pixels = {i: p.pixels for i, p in parts.items()}
         poses = _hidden_supporters(poses, shapes, models, missing, pixels)
+        left = [m for m in missing if m not in poses]
+        poses = _out_of_sight(poses, shapes, models, left, pixels, camera, meshes)
         order = sorted(poses, key=lambda i: (_lowest(shapes[i], poses[i]), i))
         poses = _settle(poses, shapes, order)
     return [{"id": i, "mesh": PARTS[i][0], "pose": poses[i]} for i in PARTS if i in poses]
