@@ -25,11 +25,12 @@
    others (the task text: all eight are reported; where exactly is not scored).
 5. Render-and-compare (`toolbox.refine_poses`): the seen parts are drawn together, so they hide
    each other, and moved until the drawing matches their colour segments and the depth. A part
-   the refined drawing explains (`PoseFit.good`) takes the refined pose; a quarter turn of it is
-   taken only when the part's own heading explains its segment badly and the part shows enough
-   of itself for a turn to be judged. A part whose drawing
-   does not explain its segment is searched again from the centre of its points (the ICP's
-   pose can sit a part-length off, turned); a part still not explained keeps its pose.
+   takes the refined pose where it explains the segment better than the pose it started from
+   (the refiner's cost); a quarter or half turn only where the start explains it badly and the
+   turn at least twice as well. A part still explained badly is searched again from the centre
+   of its points (the ICP's pose can sit a part-length off, turned). A sliver (a few pixels)
+   keeps its heading unless the refiner turns it far: it shows where the part is and which
+   faces show, but a small turn moves its pixels no more than the calibration error does.
 """
 
 import hashlib
@@ -90,8 +91,9 @@ FINE_ITERATIONS = 8
 GRID_CELL = 0.0025  # [m]
 GRID_MARGIN = 0.025  # [m]
 NEIGHBOURS = 6
-TURN_EVIDENCE = 0.1  # refiner cost above which the part's own heading is taken as wrong
-TURN_PIXELS = 50  # working pixels (`PoseFit.pixels`) a part must show for a turn to be judged
+TURN_EVIDENCE = 0.1  # refiner cost above which a part's pose explains its segment badly
+FEW_PIXELS = 40  # working pixels (`PoseFit.pixels`): a part showing fewer is a sliver
+SMALL_TURN = np.radians(60)  # a turn a sliver cannot show
 RESEARCH_SHIFT = 0.06  # [m] how far a part searched again may move from its points' centre
 BEHIND = (0.05, 0.08, 0.11, 0.15)  # [m] from a seen part, away from the camera: hiding spots
 SIGHT_SCALE = 4  # the hiding spot is tested on the image reduced this many times
@@ -746,30 +748,46 @@ def _refined(observation, meshes, camera, poses, parts, labels):
     ids = [i for i in PARTS if i in poses]
     records = [{"id": i, "mesh": PARTS[i][0], "pose": poses[i]} for i in ids]
     segments = {i: labels == k for k, i in enumerate(PARTS) if i in parts}
-    fits = refine_poses(observation, meshes, records, camera=camera, segments=segments)
-    out = dict(poses)
+
+    def fitted(recs, segs, **kw):
+        return refine_poses(observation, meshes, recs, camera=camera, segments=segs, **kw)
+
+    now = fitted(records, segments, hypotheses="given", iterations=1, max_shift=1e-4)
+    fits = fitted(records, segments)
+    out, cost = dict(poses), {i: f.cost for i, f in zip(ids, now, strict=True)}
     for i, fit in zip(ids, fits, strict=True):
-        own = dict(fit.hypotheses).get("given", 1.0)
-        turn_shown = own > TURN_EVIDENCE and fit.pixels >= TURN_PIXELS
-        if fit.good and (fit.hypothesis == "given" or turn_shown):
-            out[i] = fit.pose
-    for k, (i, fit) in enumerate(zip(ids, fits, strict=True)):
-        if fit.good or fit.pixels == 0:
+        if fit.pixels and _better(fit, cost[i]):
+            out[i], cost[i] = _kept_heading(fit, poses[i]), fit.cost
+    for k, i in enumerate(ids):
+        if not fits[k].pixels or cost[i] <= TURN_EVIDENCE:
             continue
         start = poses[i].copy()
         start[:2, 3] = parts[i].pts[:, :2].mean(axis=0)
         again = [{**r, "pose": start if r["id"] == i else out[r["id"]]} for r in records]
-        other = refine_poses(
-            observation,
-            meshes,
-            again,
-            camera=camera,
-            segments={i: segments[i]},
-            max_shift=RESEARCH_SHIFT,
-        )[k]
-        if other.good and other.cost < fit.cost:
-            out[i] = other.pose
+        other = fitted(again, {i: segments[i]}, max_shift=RESEARCH_SHIFT)[k]
+        if other.cost < cost[i] / 2:
+            out[i], cost[i] = _kept_heading(other, poses[i]), other.cost
     return out
+
+
+def _kept_heading(fit, T):
+    """The refined pose; for a sliver (fewer than FEW_PIXELS) turned by less than
+    SMALL_TURN, with the heading of `T`: a few pixels show where a part is, and which of its
+    faces show, but not a small turn (the calibration error moves them as much)."""
+    out = fit.pose.copy()
+    turn = np.arccos(np.clip((np.trace(T[:3, :3].T @ out[:3, :3]) - 1) / 2, -1.0, 1.0))
+    if fit.pixels < FEW_PIXELS and turn < SMALL_TURN:
+        out[:3, :3] = T[:3, :3]
+    return out
+
+
+def _better(fit, cost):
+    """Whether a refined fit explains its segment better than the pose it started from
+    (cost `cost`): a turn of it only when the start explains the segment badly and the turn
+    at least twice as well."""
+    if fit.hypothesis == "given":
+        return fit.cost < cost
+    return cost > TURN_EVIDENCE and fit.cost < cost / 2
 
 
 def perceive(observation, meshes, camera):
