@@ -46,6 +46,7 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
     from checks.calls import session_modules
     from checks.context import DomainSpec
     from checks.inputs import build_cases
+    from checks.suites.perceive import untellable
     from sandbox import MESHES, Program
     from sandbox.local_backend import LocalExecutor
     from sim.score import state_accuracy
@@ -80,6 +81,16 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
                 recs = [o for o in got.value if o["id"] not in unscored]
                 truth = [o for o in case["truth"] if o["id"] not in unscored]
                 score = state_accuracy(dom, recs, truth)
+                untold = untellable(dom, spec.meshes, case, recs, score)
+                if untold:  # as property.accuracy: the image cannot tell these poses
+                    recs = [o for o in recs if o["id"] not in untold]
+                    truth = [o for o in truth if o["id"] not in untold]
+                    score = state_accuracy(dom, recs, truth)
+                    row["untold"] = sorted(untold)
+                    if score.correct:
+                        progress(
+                            f"  {case['name']}: cannot be told from the truth: {row['untold']}"
+                        )
                 if score.correct:
                     continue
                 wrong += 1

@@ -68,7 +68,12 @@ RULES: tuple[Rule, ...] = (
         "the true pose, modulo the object's symmetry, and the domain's reference relations "
         "computed on your records equal those of the true scene. An object the camera does "
         "not show at all that holds nothing up only has to be reported (the image cannot say "
-        "where it stands).",
+        "where it stands). Nor is an object held to the tolerance where the image cannot tell "
+        "your pose from the true one: the true scene drawn with that one object where you put "
+        "it differs from the true scene's drawing in fewer than "
+        "{checks.suites.perceive:TELL_PX|px} pixels at the image check's resolution (silhouette, "
+        "or depth by more than {checks.suites.perceive:TELL_DEPTH|mm}), with the same "
+        "relations — a part hidden under a round one, turned.",
     ),
     Rule(
         check="image.perceive_rerender",
@@ -340,6 +345,13 @@ def accuracy(
         unscored = set(case.get("unscored", ()))  # reported (ids_match_catalogue), not placed
         recs = [o for o in perceived_out[case["name"]] if o["id"] not in unscored]
         score = state_accuracy(domain, recs, [o for o in case["truth"] if o["id"] not in unscored])
+        untold = untellable(domain, ctx.spec.meshes, case, recs, score)
+        if untold:  # judged like an object nothing shows: reported, its pose not scored
+            case = {**case, "unscored": sorted(unscored | untold)}
+            unscored |= untold
+            recs = [o for o in recs if o["id"] not in unscored]
+            kept = [o for o in case["truth"] if o["id"] not in unscored]
+            score = state_accuracy(domain, recs, kept)
         errors += [o.translation for o in score.objects]
         if score.correct:
             continue
@@ -408,6 +420,41 @@ def accuracy(
 
 
 MIN_VISIBLE_SHARE = 0.3  # an object showing less of its own silhouette is not scored by IoU
+TELL_PX = 20  # [px] at the image check's resolution: fewer pixels changed cannot be told apart
+TELL_DEPTH = 0.004  # [m] a depth change that counts as a changed pixel
+
+
+def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score: Any) -> set:
+    """The objects `score` finds off whose pose the observation cannot tell from the true one:
+    the true scene drawn with that one object where `recs` put it differs from the true
+    scene's drawing in fewer than `TELL_PX` pixels at the image check's resolution (the
+    silhouettes, or the depth by more than `TELL_DEPTH`), and has the same reference relations
+    (so it holds up what it holds up). Only for a reading with every object reported once."""
+    from sim.score import state_accuracy
+    from toolbox import render_scene
+
+    if score.correct or score.missing or score.extra or "reference_camera" not in case:
+        return set()
+    got = {o["id"]: o for o in recs}
+    truth = list(case["truth"])
+    camera = case["reference_camera"]
+    base = None
+    out = set()
+    for e in score.objects:
+        if e.within or e.id not in got:
+            continue
+        moved = [dict(o, pose=got[o["id"]]["pose"]) if o["id"] == e.id else o for o in truth]
+        if not state_accuracy(domain, moved, truth).relations_correct:
+            continue
+        base = base or render_scene(truth, meshes, camera)
+        drawn = render_scene(moved, meshes, camera)
+        both = (base["mask"] >= 0) & (drawn["mask"] >= 0)
+        changed = (base["mask"] != drawn["mask"]) | (
+            both & (np.abs(base["depth"] - drawn["depth"]) > TELL_DEPTH)
+        )
+        if int(changed.sum()) < TELL_PX:
+            out.add(e.id)
+    return out
 
 
 def calibration_pixels(case: Mapping[str, Any]) -> int:

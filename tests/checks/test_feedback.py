@@ -263,3 +263,50 @@ def test_a_hidden_cube_is_not_scored_for_its_pose_but_the_visible_ones_are(tmp_p
     rows = {r["object"]: r for r in result.objects}
     assert rows[unseen]["scored"] is False and rows[unseen]["within_tolerance"] is True
     assert rows[seen]["within_tolerance"] is False
+
+
+@pytest.mark.slow
+def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
+    """`property.accuracy` holds an object to the tolerance only where the image can tell: a
+    cube hidden 12 mm behind a tower, read 15 mm farther back (still hidden, the same
+    relations), passes; read 10 mm to the side, where a strip of it would show, fails."""
+    from checks.inputs import observation_case
+    from checks.suites import perceive as perceive_suite
+
+    dom = domains.load("cubes")
+
+    def rec(oid, x, y, z):
+        return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
+
+    h, x0 = 0.02, 0.55
+    scene = [
+        rec("red", x0, 0, h),
+        rec("green", x0, 0, 3 * h),
+        rec("blue", x0, 0, 5 * h),
+        rec("yellow", x0 - 2 * h - 0.012, 0, h),
+        rec("purple", 0.45, 0.2, h),
+        rec("cyan", 0.45, -0.2, h),
+    ]
+    case = observation_case(dom, "obs01/behind", scene, dom.camera("front"), "front", 1)
+    ids = [o["id"] for o in case["truth"]]
+    assert not (case["reference"]["full"]["mask"] == ids.index("yellow")).any()
+    ctx = SuiteContext(
+        function="perceive",
+        spec=DomainSpec.of(dom),
+        cases={"observations": [case]},
+        budget=DEFAULT,
+        draft=InProcess(lambda *a: None),
+        out_dir=tmp_path,
+    )
+
+    def read(dx, dy):
+        records = [dict(o, pose=np.array(o["pose"], float)) for o in case["truth"]]
+        for o in records:
+            if o["id"] == "yellow":
+                o["pose"][:2, 3] += (dx, dy)
+        ctx.outputs["perceived"] = {case["name"]: records}
+        return perceive_suite.accuracy(ctx, dom)
+
+    assert read(-0.015, 0).status == "passed"
+    sideways = read(0, 0.011)
+    assert sideways.status == "failed" and "'yellow' is 11.0 mm off" in sideways.message
