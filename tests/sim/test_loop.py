@@ -560,10 +560,11 @@ def test_the_frozen_sets_referee_tells_a_misreading_from_a_move():
 
 @pytest.mark.slow
 def test_the_frozen_sets_referee_keeps_a_hidden_belief_against_a_refuted_reading():
-    """A dev-side composed cubes scene through a low envelope camera (the scene after step 6
-    of composed/seed5010): `perceive` reads blue 40 mm off, where the image shows something
-    else, and blue's true pose is hidden behind the tower. The image cannot show the belief,
-    but it refutes the reading: the belief is kept."""
+    """The scenes after each reference step of a dev-side composed cubes instance
+    (composed/seed5010) through a low envelope camera: in the first where `perceive` reads a
+    cube more than 30 mm off and that cube's true pose is hidden (blue behind the tower; step 6
+    or 7 — which one depends on the machine's floating point), the image cannot show the
+    belief but it refutes the reading: the belief is kept."""
     import zlib
 
     from benchmarks.loop_looks import scenes_of
@@ -572,22 +573,28 @@ def test_the_frozen_sets_referee_keeps_a_hidden_belief_against_a_refuted_reading
     domain = domains.load("cubes")
     instance = domain.composed_instance(5010)
     assert instance is not None
-    scene = scenes_of(instance)[6]
     camera = load_camera(REPO / "docs" / "cameras" / "envelope-1.json")
-    obs = observe(domain, {"domain": "cubes", **scene}, camera, realism="default",
-                  seed=zlib.crc32(b"composed/seed5010/6/0/s"),
-                  calibration_seed=zlib.crc32(b"composed/seed5010/camera"))  # fmt: skip
     policy = ProgramPolicy(load("cubes"), "artifacts", sandbox="local")
     try:
-        seen = policy.runner().perceive(obs)
-        truth = {o["id"]: np.asarray(o["pose"], float) for o in scene["objects"]}
-        read = next(np.asarray(r["pose"], float) for r in seen if r["id"] == "blue")
-        off = float(np.linalg.norm(read[:3, 3] - truth["blue"][:3, 3]))
-        assert off > 0.03, f"the draw no longer shows the misreading ({1000 * off:.0f} mm)"
-        believed = [{**r, "pose": truth["blue"].tolist()} if r["id"] == "blue" else r for r in seen]
-        fits = {o.id: o for o in scene_fit(domain, obs, believed, policy.runner().render).objects}
-        assert fits["blue"].support is None, "blue's true pose is no longer hidden in this draw"
-        assert policy.look_prefers_belief(domain, obs, seen, believed) == ["blue"]
+        for k, scene in enumerate(scenes_of(instance)):
+            obs = observe(domain, {"domain": "cubes", **scene}, camera, realism="default",
+                          seed=zlib.crc32(f"composed/seed5010/{k}/0/s".encode()),
+                          calibration_seed=zlib.crc32(b"composed/seed5010/camera"))  # fmt: skip
+            seen = policy.runner().perceive(obs)
+            truth = {o["id"]: np.asarray(o["pose"], float) for o in scene["objects"]}
+            for r in seen:
+                off = float(
+                    np.linalg.norm(np.asarray(r["pose"], float)[:3, 3] - truth[r["id"]][:3, 3])
+                )
+                if off <= 0.03:
+                    continue
+                believed = [{**x, "pose": truth[r["id"]].tolist()} if x["id"] == r["id"] else x
+                            for x in seen]  # fmt: skip
+                fits = scene_fit(domain, obs, believed, policy.runner().render).objects
+                if next(o for o in fits if o.id == r["id"]).support is None:  # hidden
+                    assert policy.look_prefers_belief(domain, obs, seen, believed) == [r["id"]]
+                    return
+        pytest.fail("no scene shows a hidden cube misread by more than 30 mm any more")
     finally:
         policy.close()
 
