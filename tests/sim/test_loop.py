@@ -562,9 +562,9 @@ def test_the_frozen_sets_referee_tells_a_misreading_from_a_move():
 def test_the_frozen_sets_referee_keeps_a_hidden_belief_against_a_refuted_reading():
     """The scenes after each reference step of a dev-side composed cubes instance
     (composed/seed5010) through a low envelope camera: in the first where `perceive` reads a
-    cube more than 30 mm off and that cube's true pose is hidden (blue behind the tower; step 6
-    or 7 — which one depends on the machine's floating point), the image cannot show the
-    belief but it refutes the reading: the belief is kept."""
+    cube more than 30 mm off and that cube's true pose is hidden (blue behind the tower: after
+    step 6 on one development machine, step 7 on another), the image cannot show the belief
+    but it refutes the reading: the belief is kept."""
     import zlib
 
     from benchmarks.loop_looks import scenes_of
