@@ -822,6 +822,11 @@ def perceive(observation, meshes, camera):
     poses = _choose(parts, shapes, heights)
     poses = _push_apart(poses, shapes, {i: p.pixels for i, p in parts.items()})
     poses = _refined(observation, meshes, camera, poses, parts, labels)
+    # the refiner judges the image only: settle its poses again, and part what it pushed in
+    order = sorted(poses, key=lambda i: (_lowest(shapes[i], poses[i]), i))
+    poses = _push_apart(
+        _settle(poses, shapes, order), shapes, {i: p.pixels for i, p in parts.items()}
+    )
     if missing:
         pixels = {i: p.pixels for i, p in parts.items()}
         poses = _hidden_supporters(poses, shapes, models, missing, pixels)
