@@ -46,10 +46,9 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
     from checks.calls import session_modules
     from checks.context import DomainSpec
     from checks.inputs import build_cases
-    from checks.suites.perceive import untellable
+    from checks.suites.perceive import reading_score
     from sandbox import MESHES, Program
     from sandbox.local_backend import LocalExecutor
-    from sim.score import state_accuracy
 
     dom = domains.load(domain_name)
     spec = DomainSpec.of(dom)
@@ -77,15 +76,8 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
                     rows.append({**row, "error": f"{got.verdict}: {got.detail}"[:300]})
                     wrong += 1
                     continue
-                unscored = set(case.get("unscored", ()))
-                recs = [o for o in got.value if o["id"] not in unscored]
-                truth = [o for o in case["truth"] if o["id"] not in unscored]
-                score = state_accuracy(dom, recs, truth)
-                untold = untellable(dom, spec.meshes, case, recs, score)
-                if untold:  # as property.accuracy: the image cannot tell these poses
-                    recs = [o for o in recs if o["id"] not in untold]
-                    truth = [o for o in truth if o["id"] not in untold]
-                    score = state_accuracy(dom, recs, truth)
+                score, untold = reading_score(dom, spec.meshes, case, got.value)
+                if untold:  # not scored, as in property.accuracy: the image cannot tell them
                     row["untold"] = sorted(untold)
                     if score.correct:
                         progress(

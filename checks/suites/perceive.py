@@ -317,8 +317,6 @@ def accuracy(
 
     `renders` (the re-renders `image.perceive_rerender` judges) and `out_dir` give the failing
     observation's per-object rows and picture."""
-    from sim.score import state_accuracy
-
     t0 = time.perf_counter()
     tol = domain.tolerance
     r = CheckResult(
@@ -342,16 +340,10 @@ def accuracy(
     errors: list[float] = []
     wrong_cases: list[str] = []
     for case in scored:
-        unscored = set(case.get("unscored", ()))  # reported (ids_match_catalogue), not placed
-        recs = [o for o in perceived_out[case["name"]] if o["id"] not in unscored]
-        score = state_accuracy(domain, recs, [o for o in case["truth"] if o["id"] not in unscored])
-        untold = untellable(domain, ctx.spec.meshes, case, recs, score)
-        if untold:  # judged like an object nothing shows: reported, its pose not scored
-            case = {**case, "unscored": sorted(unscored | untold)}
-            unscored |= untold
-            recs = [o for o in recs if o["id"] not in unscored]
-            kept = [o for o in case["truth"] if o["id"] not in unscored]
-            score = state_accuracy(domain, recs, kept)
+        score, untold = reading_score(domain, ctx.spec.meshes, case, perceived_out[case["name"]])
+        if untold:  # shown like an object nothing shows: reported, its pose not scored
+            case = {**case, "unscored": sorted({*case.get("unscored", ()), *untold})}
+        recs = [o for o in perceived_out[case["name"]] if o["id"] not in case.get("unscored", ())]
         errors += [o.translation for o in score.objects]
         if score.correct:
             continue
@@ -422,6 +414,25 @@ def accuracy(
 MIN_VISIBLE_SHARE = 0.3  # an object showing less of its own silhouette is not scored by IoU
 TELL_PX = 20  # [px] at the image check's resolution: fewer pixels changed cannot be told apart
 TELL_DEPTH = 0.004  # [m] a depth change that counts as a changed pixel
+
+
+def reading_score(domain: Any, meshes: Mapping, case: dict, records: list[dict]) -> tuple:
+    """(`sim.score.state_accuracy` of `records` on observation `case`, the ids left out of it
+    because the image cannot tell their poses (`untellable`)) — how `property.accuracy` scores
+    one reading. Objects the case leaves unscored (nothing shows them, they hold nothing up)
+    are reported (`property.ids_match_catalogue`), never placed."""
+    from sim.score import state_accuracy
+
+    left_out = set(case.get("unscored", ()))
+    recs = [o for o in records if o["id"] not in left_out]
+    truth = [o for o in case["truth"] if o["id"] not in left_out]
+    score = state_accuracy(domain, recs, truth)
+    untold = untellable(domain, meshes, case, recs, score)
+    if untold:
+        recs = [o for o in recs if o["id"] not in untold]
+        truth = [o for o in truth if o["id"] not in untold]
+        score = state_accuracy(domain, recs, truth)
+    return score, untold
 
 
 def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score: Any) -> set:
