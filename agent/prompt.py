@@ -20,6 +20,7 @@ from importlib import resources
 from string import Template
 
 from agent.clients.base import Block, ImageBlock, ModelRequest, TextBlock
+from checks.rules import render
 from contracts.functions import CODE_DEPS, CONTRACT_DEPS, SIGNATURES, authoring_order
 
 
@@ -86,7 +87,7 @@ def build_request(
 ) -> ModelRequest:
     system_text = "\n\n".join(
         [
-            template("system.md"),
+            render(template("system.md"))[0],
             template("representation.md"),
             "# The toolbox\n\n" + ctx.toolbox_docs,
         ]

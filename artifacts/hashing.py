@@ -81,15 +81,24 @@ def toolbox_docs_hash() -> str:
 
 # What a frozen set passed its checks against (the manifest's `contracts_hash` and
 # `toolbox_hash`): the contracts its arguments and results obey, and the code its programs
-# call — the toolbox with the layer it stands on (`toolbox.robot.Hand` is `geometry.hand`).
+# call — the toolbox with the layer it stands on (`toolbox.robot.Hand` is `geometry.moves`).
 CHECKED_AGAINST = {"contracts_hash": ("contracts",), "toolbox_hash": ("toolbox", "geometry")}
+
+
+def robot_hash() -> str:
+    """sha256 of the robot description in force (`geometry.robot.ROBOT`, which `RIVET_ROBOT`
+    may name a file for): the hand a set was checked against."""
+    from geometry.robot import ROBOT
+
+    return sha256_text(json.dumps(ROBOT.to_json(), sort_keys=True))
 
 
 def checked_against() -> dict[str, str]:
     """The current `contracts_hash` and `toolbox_hash` of this checkout: the toolbox hash
-    covers the code's behaviour and the documentation the prompts show of it."""
+    covers the code's behaviour, the documentation the prompts show of it and the robot
+    description in force."""
     out = {key: tree_hash(*trees) for key, trees in CHECKED_AGAINST.items()}
-    out["toolbox_hash"] = sha256_text(out["toolbox_hash"] + toolbox_docs_hash())
+    out["toolbox_hash"] = sha256_text(out["toolbox_hash"] + toolbox_docs_hash() + robot_hash())
     return out
 
 

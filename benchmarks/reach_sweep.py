@@ -1,6 +1,6 @@
 """The workspace promise, object by object: every object (one per mesh; objects sharing a mesh
 are the same) alone on the table, anywhere in the domain's workspace (every vertex inside it) at four yaws — does one of the executor's grasp
-candidates (`geometry.hand` through `Domain.grasps`) have an arm solution
+candidates (`geometry.grasps` through `Domain.grasps`) have an arm solution
 (`sim.reach.Reach`, the executor's IK) at the pick and the place (here the same pose)?
 
 Usage:

@@ -1,6 +1,6 @@
 """The robot's view of a plan, for the checks: can the executor carry out every step?
 
-Design rule: nothing here is a model of its own. The hand is `geometry.hand` (the model the
+Design rule: nothing here is a model of its own. The hand is `geometry.moves` (the model the
 executor picks its grasps with, and that programs get as `toolbox.hand`); the arm is
 `sim.reach` (the executor's IK test). A step is executable when some top-down grasp of the
 2F-85 clears every other object at the pick (in the state before the step) and at the place
@@ -39,7 +39,7 @@ class RobotView:
     def __init__(self, domain: Any) -> None:
         from sim.reach import Reach
 
-        self.moves = domain.grasps  # geometry.hand.MoveCheck over the domain's meshes
+        self.moves = domain.grasps  # geometry.moves.MoveCheck over the domain's meshes
         self.reach = Reach()
 
     def first_problem(

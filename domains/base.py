@@ -252,7 +252,7 @@ class Domain:
 
     @cached_property
     def grasps(self) -> MoveCheck:
-        """The robot's grasp predicate for moves of this domain's objects (`geometry.hand`)."""
+        """The robot's grasp predicate for moves of this domain's objects (`geometry.moves`)."""
         return MoveCheck(self._meshes, self._symmetries, self.parts)
 
     @cached_property
@@ -289,7 +289,7 @@ class Domain:
                 `sim.settle.physical_problems`: they do not settle in MuJoCo); None: geometry
                 only (workspace, height, interpenetration).
             grasps: make the order executable by the robot (every step has a 2F-85 grasp,
-                `geometry.hand`); None: when `physics` is given.
+                `geometry.moves`); None: when `physics` is given.
             ordered: False: no construction order (the instance's ``order`` is empty), for
                 callers that need only the two scenes; a start no order reaches is kept.
         """

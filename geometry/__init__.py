@@ -5,7 +5,10 @@ executor's grasp model and the programs' toolbox agree on.
 - `shape`: shapes as convex pieces (from collision parts or a mesh), mass, resting poses;
 - `contacts`: interpenetration, support, stability with loads, contact relations;
 - `plans`: applying a plan of transfers and judging every state (the one "plan success");
-- `hand`: the Robotiq 2F-85 on the FR3 — top-down grasps and whole moves;
+- `robot`: the robot description (arm, joints, reach, gripper stroke and fingers) every part is
+  built from (`ROBOT`);
+- `grasps`, `clearance`, `moves`: the robot's hand — top-down grasps, the gripper's volume
+  against meshes, whole moves among neighbours;
 - `tolerances`: the one table of tolerances, each entry with the physical fact behind it.
 
 Pure numpy/scipy/trimesh (no simulator, no I/O), so it runs on the host and inside the
@@ -35,26 +38,25 @@ from geometry.convex import (
     yaw_of,
     yaw_pose,
 )
-from geometry.hand import (
+from geometry.grasps import Grasp, GraspReport, Obstacle, plan_grasps
+from geometry.moves import MoveCheck, MoveVerdict
+from geometry.plans import PlanOutcome, PlanProblem, Workspace, apply_plan
+from geometry.robot import (
     PLACEMENT,
     PLACEMENT_SPREAD,
+    ROBOT,
     STROKE,
     WORKSPACE,
     FingerModel,
-    Grasp,
-    GraspReport,
-    MoveCheck,
-    MoveVerdict,
-    Obstacle,
-    plan_grasps,
+    Robot,
 )
-from geometry.plans import PlanOutcome, PlanProblem, Workspace, apply_plan
 from geometry.shape import RestingPose, Shape, stable_poses
 from geometry.tolerances import TOLERANCES, Tolerances
 
 __all__ = [
     "PLACEMENT",
     "PLACEMENT_SPREAD",
+    "ROBOT",
     "STROKE",
     "TABLE",
     "TOLERANCES",
@@ -72,6 +74,7 @@ __all__ = [
     "PlanOutcome",
     "PlanProblem",
     "RestingPose",
+    "Robot",
     "Shape",
     "Tolerances",
     "UnknownShape",

@@ -11,7 +11,7 @@ from typing import Any, Literal, Protocol
 
 import mujoco
 
-from geometry.hand import Grasp
+from geometry.grasps import Grasp
 from sim.errors import ExecutionError, FailureKind
 from sim.sensing import WRIST_CAMERA, InHandNoise
 

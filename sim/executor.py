@@ -35,7 +35,7 @@ import trimesh
 from contracts import se3
 from contracts.errors import UsageError
 from contracts.limits import clip
-from geometry.hand import Grasp
+from geometry.grasps import Grasp
 from sim import robot
 from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments, split_at
 from sim.execution import (

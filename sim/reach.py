@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geometry.hand import Grasp
+from geometry.grasps import Grasp
 from sim import robot
 from sim.ik import ArmIK, IKSolution
 

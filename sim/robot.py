@@ -1,9 +1,10 @@
-"""The robot: a Franka Research 3 arm with a Robotiq 2F-85 gripper, from MuJoCo Menagerie.
+"""The robot in the simulator: the arm and gripper `geometry.robot.ROBOT` describes (a Franka
+Research 3 with a Robotiq 2F-85 by default), from MuJoCo Menagerie.
 
-Design rule: every name and number the rest of `sim` needs about the robot lives here (joint,
-actuator, site and geom names, the park posture, the measurement of the gripper's stroke that
-`geometry.hand.STROKE` records), so the executor
-and the IK never spell a menagerie name themselves. The models are read through
+Design rule: the description says which models, joints, postures and tool frame; this module
+turns it into MuJoCo elements and names (joint, actuator, site and geom names, the park key,
+the TCP site, the measurement of the gripper's stroke that `ROBOT.gripper.stroke` records), so
+the executor and the IK never spell a menagerie name themselves. The models are read through
 `mujoco_menagerie` (offline: `MENAGERIE_ROOT`); nothing is copied into this repository.
 
 The robot's frames: the arm's base sits at the world origin; the TCP site `robot/tcp` lies
@@ -14,6 +15,7 @@ y axis along the jaws' closing direction (the gripper's own frame).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import pathlib
 from collections.abc import Iterator
@@ -23,13 +25,13 @@ from typing import Any, Literal
 import mujoco
 import numpy as np
 
-from geometry.hand import GripperStroke
+from geometry.robot import ROBOT, GripperStroke
 from sim.errors import RobotModelError
 
 PREFIX = "robot/"
 """Prefix of every element the robot adds to a scene."""
 
-ARM_JOINTS: tuple[str, ...] = tuple(f"{PREFIX}fr3_joint{i}" for i in range(1, 8))
+ARM_JOINTS: tuple[str, ...] = tuple(f"{PREFIX}{name}" for name in ROBOT.arm.joints)
 ARM_ACTUATORS: tuple[str, ...] = ARM_JOINTS  # the menagerie names actuators after joints
 GRIPPER_ACTUATOR = f"{PREFIX}gripper/fingers_actuator"
 GRIPPER_BASE_BODY = f"{PREFIX}gripper/base"
@@ -45,28 +47,31 @@ WELD_ASSIST = f"{PREFIX}weld_assist"
 """An inactive weld from the gripper base to the world; the executor retargets it to a held
 object while the weld assist is on (see docs/executor.md)."""
 
-TCP_OFFSET = 0.145
+TCP_OFFSET = ROBOT.gripper.tcp_offset
 """TCP position along the gripper's z axis from its base [m]: the pads' centre when closed."""
 
-PARK_QPOS = np.array([0.0, -0.6, 0.0, -0.5, 0.0, 3.9, 0.785])
-"""Arm posture for observations [rad]: upright and leaning back, wrist folded behind the base,
-so that cameras in front of the table (x ≈ 1.0–1.3 m, elevated) do not see the arm over the
-workspace."""
+PARK_QPOS = np.array(ROBOT.arm.park)
+"""Arm posture for observations [rad]: out of the cameras' sight over the workspace."""
 
-READY_QPOS = np.array([0.0, -0.35, 0.0, -2.12, 0.0, 1.771, 0.785])
-"""Arm posture above the workspace, TCP at (0.45, 0, 0.40) m pointing down [rad]: the IK's
-posture target and the way in and out of the park posture."""
+READY_QPOS = np.array(ROBOT.arm.ready)
+"""Arm posture above the workspace [rad]: the IK's posture target and the way in and out of
+the park posture."""
 
-ARM_VELOCITY_LIMITS = np.array([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
-"""FR3 joint speed limits [rad/s] (Franka's datasheet)."""
+ARM_VELOCITY_LIMITS = np.array(ROBOT.arm.velocity_limits)
+"""Joint speed limits [rad/s]."""
 
-GRIPPER_OPEN = 0.0
-GRIPPER_CLOSED = 255.0
-"""The 2F-85's control range: 0 fully open (85 mm), 255 fully closed."""
+GRIPPER_OPEN, GRIPPER_CLOSED = ROBOT.gripper.control
+"""The gripper's control range: fully open, fully closed."""
 
 Visuals = bool | Literal["coarse"]  # the robot's visual meshes: all, none, or merged (drawing)
 DRAWING_CELL_M = 0.001  # [m] the grid a drawing's robot meshes merge their vertices on
 _INTEGRATOR = mujoco.mjtIntegrator.mjINT_IMPLICITFAST  # what the menagerie FR3 scene uses
+_QPOS_SIZE = {
+    mujoco.mjtJoint.mjJNT_FREE: 7,
+    mujoco.mjtJoint.mjJNT_BALL: 4,
+    mujoco.mjtJoint.mjJNT_SLIDE: 1,
+    mujoco.mjtJoint.mjJNT_HINGE: 1,
+}
 
 
 def _load_spec(robot: str, entry: str) -> mujoco.MjSpec:
@@ -77,7 +82,8 @@ def _load_spec(robot: str, entry: str) -> mujoco.MjSpec:
     except Exception as exc:
         raise RobotModelError(
             f"cannot load menagerie model {robot}/{entry}: {exc}. Offline, point "
-            "MENAGERIE_ROOT at a folder holding franka_fr3/ and robotiq_2f85/ "
+            f"MENAGERIE_ROOT at a folder holding {ROBOT.arm.model[0]}/ and "
+            f"{ROBOT.gripper.model[0]}/ "
             "(e.g. export MENAGERIE_ROOT=../shared/menagerie)"
         ) from exc
     return spec
@@ -203,8 +209,8 @@ def no_mesh_cache() -> Iterator[None]:
 
 
 def _arm_with_gripper(*, visuals: Visuals = True) -> mujoco.MjSpec:
-    arm = _load_spec("franka_fr3", "fr3")
-    gripper = _load_spec("robotiq_2f85", "2f85")
+    arm = _load_spec(*ROBOT.arm.model)
+    gripper = _load_spec(*ROBOT.gripper.model)
     _absolute_meshdir(arm)
     _absolute_meshdir(gripper)
     if visuals == "coarse":
@@ -221,6 +227,7 @@ def _arm_with_gripper(*, visuals: Visuals = True) -> mujoco.MjSpec:
     arm.option.impratio = 10.0
     for key in list(arm.keys):
         arm.delete(key)  # the arm's "home" key knows no gripper joints; we add our own
+    n_gripper_q = sum(_QPOS_SIZE[j.type] for j in gripper.joints)
     arm.attach(gripper, prefix="gripper/", site=arm.site("attachment_site"))
     arm.body("gripper/base").add_site(
         name="tcp",
@@ -229,7 +236,6 @@ def _arm_with_gripper(*, visuals: Visuals = True) -> mujoco.MjSpec:
         rgba=[1.0, 0.3, 0.1, 1.0],
         group=5,
     )
-    n_gripper_q = 8
     arm.add_key(
         name="park",
         qpos=[*PARK_QPOS, *([0.0] * n_gripper_q)],
@@ -353,10 +359,11 @@ def tcp_pose(data: mujoco.MjData, index: RobotIndex) -> np.ndarray:
 
 @functools.cache
 def measure_stroke() -> GripperStroke:
-    """Measure the 2F-85's stroke in simulation: pad gap and fingertip depth over its control
-    range. `geometry.hand.STROKE` holds the numbers this gives (a test compares them), so
-    nothing else needs the simulator for the hand."""
-    gripper = _load_spec("robotiq_2f85", "2f85")
+    """Measure the gripper's stroke in simulation: pad gap and fingertip depth over its control
+    range (the pads' size and widest opening are the description's). `ROBOT.gripper.stroke`
+    holds the numbers this gives (a test compares them), so nothing else needs the simulator
+    for the hand."""
+    gripper = _load_spec(*ROBOT.gripper.model)
     _absolute_meshdir(gripper)
     gripper.compiler.degree = False
     gripper.option.gravity = [0.0, 0.0, 0.0]
@@ -365,7 +372,7 @@ def measure_stroke() -> GripperStroke:
     data = mujoco.MjData(model)
     base = model.body("base").id
     pads = [model.geom(n).id for n in ("left_pad1", "right_pad1")]
-    ctrls = np.linspace(GRIPPER_OPEN, GRIPPER_CLOSED, 18)
+    ctrls = np.linspace(GRIPPER_OPEN, GRIPPER_CLOSED, len(ROBOT.gripper.stroke.ctrl))
     gaps, tips = [], []
     for c in ctrls:
         data.ctrl[0] = c
@@ -377,4 +384,6 @@ def measure_stroke() -> GripperStroke:
         half_height = model.geom_size[pads[0], 2]
         gaps.append(abs(centres[1][1] - centres[0][1]) - 2 * half_thickness)
         tips.append(0.5 * (centres[0][2] + centres[1][2]) + half_height - TCP_OFFSET)
-    return GripperStroke(ctrl=ctrls, gap=np.maximum(np.array(gaps), 0.0), tip=np.array(tips))
+    return dataclasses.replace(
+        ROBOT.gripper.stroke, ctrl=ctrls, gap=np.maximum(np.array(gaps), 0.0), tip=np.array(tips)
+    )

@@ -15,7 +15,8 @@ import numpy as np
 import trimesh
 
 from contracts import se3
-from geometry.hand import STROKE, Grasp, Obstacle, plan_grasps
+from geometry.grasps import Grasp, Obstacle, plan_grasps
+from geometry.robot import STROKE
 from sim import robot
 from sim._motion import PlanFailure, PlannedSegment, Segment, plan_segments
 from sim.execution import ExecutorConfig

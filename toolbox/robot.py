@@ -1,8 +1,8 @@
 """The robot's hand and reach: what the executor can do with one plan step, as it models it.
 
-This is the executor's own model (`geometry.hand`, re-exported): it picks its grasps with
-these functions, and the plan checks (`property.gripper_room`) refuse every step they reject.
-The robot is a Franka FR3 with a Robotiq 2F-85 parallel gripper. A step is one transfer: the
+This is the executor's own model (`geometry.grasps` and `geometry.moves`, re-exported): it picks
+its grasps with these functions, and the plan checks (`property.gripper_room`) refuse every step
+they reject. The robot is a Franka FR3 with a Robotiq 2F-85 parallel gripper. A step is one transfer: the
 gripper comes down vertically over the object, closes its jaws across two opposite vertical
 faces (at most `MAX_GRASP_WIDTH` apart), lifts it straight up, carries it at a safe height,
 turns it only about the vertical, lowers it straight down onto the target and opens. So a step needs:
@@ -41,17 +41,10 @@ from typing import Any
 
 import numpy as np
 
-from geometry import (
-    PLACEMENT,
-    PLACEMENT_SPREAD,
-    STROKE,
-    WORKSPACE,
-    GraspReport,
-    MoveVerdict,
-    Shape,
-    Workspace,
-)
-from geometry.hand import MAX_GRASP_WIDTH, FingerModel, Grasp, MoveCheck, Obstacle, plan_grasps
+from geometry import GraspReport, MoveVerdict, Shape, Workspace
+from geometry.grasps import Grasp, Obstacle, plan_grasps
+from geometry.moves import MoveCheck
+from geometry.robot import ROBOT
 from geometry.tolerances import TOLERANCES
 from toolbox.errors import ToolboxError
 
@@ -76,16 +69,21 @@ __all__ = [
     "Workspace",
 ]
 
-MAX_OPENING = STROKE.max_gap  # [m] widest the 2F-85's jaws open
-JAW_CLEARANCES = FingerModel().clearances  # [m] per side, beyond the gripped width
+# The robot's facts, from its description (`geometry.robot.ROBOT`):
+WORKSPACE = ROBOT.arm.workspace  # where the arm reaches top-down
+PLACEMENT = ROBOT.arm.placement  # where scenes keep their objects, inside WORKSPACE
+PLACEMENT_SPREAD = ROBOT.arm.placement_spread  # [m] (gap, max shift) for tightly packed goals
+MAX_GRASP_WIDTH = ROBOT.gripper.max_grasp_width  # [m] the widest face pair the jaws take
+MAX_OPENING = ROBOT.gripper.stroke.max_gap  # [m] widest the jaws open
+JAW_CLEARANCES = ROBOT.gripper.fingers.clearances  # [m] per side, beyond the gripped width
 # [m] a fingertip's extent outwards from its pad face, and across the closing direction
-FINGER_DEPTH = FingerModel().segments[0][2]
-FINGER_WIDTH = 2 * FingerModel().segments[0][3]
+FINGER_DEPTH = ROBOT.gripper.fingers.depth
+FINGER_WIDTH = ROBOT.gripper.fingers.width
+WRIST_RANGE = ROBOT.arm.wrist_range  # [rad] the arm's last joint (the flange about the tool axis)
 GRASP_MARGINS = TOLERANCES.grasp_margins  # [m] gripper to neighbours, larger preferred
 SWEEP_TOUCH = TOLERANCES.sweep_touch  # [m] the held object's sweep may touch others this deep
 SWEEP_CLEARANCE = TOLERANCES.sweep_clearance  # [m] from the sweep to an overhang
 YAW_ONLY = TOLERANCES.yaw_only  # [rad] tilt within which a turn is one about the vertical
-WRIST_RANGE = (-3.0159, 3.0159)  # [rad] the FR3's last joint (the flange about the tool axis)
 
 
 class Hand:

@@ -20,6 +20,7 @@ from checks import images
 from checks.context import SuiteContext
 from contracts import se3
 from geometry import (
+    ROBOT,
     STROKE,
     TOLERANCES,
     Body,
@@ -66,7 +67,7 @@ def _part_names(fingers: FingerModel) -> list[str]:
         )
         names += [what, what]
     names.append("spring links between the fingers")
-    palm = ["gripper base", "FR3 wrist"]
+    palm = ["gripper base", f"{ROBOT.arm.name} wrist"]
     names += [palm[j] if j < len(palm) else "arm" for j in range(len(fingers.palm))]
     return names
 
@@ -95,7 +96,7 @@ def gripper_hits(
     Returns (a sentence, boxes at the pick, boxes at the place); boxes are
     {"corners": (8, 3), "hit": bool} for `images.state_views`.
     """
-    fingers = FingerModel()
+    fingers = ROBOT.gripper.fingers
     report = plan_grasps(
         ctx.spec.meshes[mesh],
         T_from,

@@ -40,6 +40,7 @@ from contracts import se3
 from contracts.errors import ContractError
 from contracts.validate import validate
 from geometry import apply_plan
+from geometry.robot import ROBOT
 from sandbox import MESHES
 
 VARIANTS = ("as_generated", "both_moved", "goal_is_moved_start")
@@ -97,7 +98,8 @@ RULES: tuple[Rule, ...] = (
     Rule(
         check="property.gripper_room",
         text="Every step is one the robot can make as `toolbox.robot.Hand(meshes, "
-        "symmetries).can_move` models it: a top-down 2F-85 grasp across two opposite vertical "
+        "symmetries).can_move` models it: a top-down {geometry.robot:ROBOT.gripper.name} grasp "
+        "across two opposite vertical "
         "faces at most {toolbox.robot:MAX_GRASP_WIDTH|mm} apart (the "
         "jaws open at most {toolbox.robot:MAX_OPENING|mm} and need room on both sides) whose "
         "fingers, finger linkages, gripper base and wrist clear every other object by at least "
@@ -483,7 +485,8 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
                 found.append(Failure(
                     message=f"on {what}: step {problem.step} {problem.message}"
                     + (f". Diagnosis: {hit}" if hit else ""),
-                    expected="every step has a top-down 2F-85 grasp that clears the other objects "
+                    expected=f"every step has a top-down {ROBOT.gripper.name} grasp that clears "
+                    "the other objects "
                     "at the pick (the state before the step) and at the place (after it), "
                     "nothing above the object at either, and an arm pose (IK) at both",
                     actual={

@@ -35,7 +35,7 @@ CHECK_NAME = re.compile(r"^(interface|schema|property|image)\.[a-z_]+$")
 # hand model and the toolbox define (a domain's own values, a property's declared parameters).
 SOURCES = (
     "geometry.tolerances:",
-    "geometry.hand:",
+    "geometry.robot:",
     "toolbox.robot:",
     "checks.images:",
     "checks.budget:",

@@ -18,7 +18,7 @@ def _edited(tmp_path: Path, source: Path, edit) -> Path:
 
 
 def test_a_comment_or_a_docstring_leaves_a_module_unchanged(tmp_path):
-    for rel in ("geometry/hand.py", "toolbox/render.py"):
+    for rel in ("geometry/grasps.py", "toolbox/render.py"):
         path = REPO / rel
         before = behaviour_bytes(path)
 

@@ -173,7 +173,7 @@ def test_benchmark_is_geometrically_valid_with_executable_orders(domain, benchma
 
 
 def test_benchmark_orders_have_a_grasp_at_every_step(domain, benchmark):
-    # the robot's predicate (geometry.hand.plan_grasps, every other object a neighbour at both
+    # the robot's predicate (geometry.grasps.plan_grasps, every other object a neighbour at both
     # ends), geometry only, no physics
     for inst in benchmark:
         bad = domain.grasps.first_infeasible(inst.start["objects"], inst.order)

@@ -13,7 +13,7 @@ import pytest
 
 import domains
 from domains.base import Domain
-from geometry.hand import WORKSPACE, FingerModel
+from geometry.robot import ROBOT, WORKSPACE, FingerModel
 
 PROGRAMS = sorted(Path(domains.__file__).parent.glob("*/programs/*.py"))
 # the earlier failing versions the replay transcripts show: people-written too
@@ -34,7 +34,9 @@ def _hand_facts(values: set[float]) -> set[float]:
 
 
 HAND = _hand_facts(
-    set().union(*(_floats(getattr(FingerModel(), f)) for f in FingerModel.__dataclass_fields__))
+    set().union(
+        *(_floats(getattr(ROBOT.gripper.fingers, f)) for f in FingerModel.__dataclass_fields__)
+    )
 )
 REGIONS = (
     _floats(WORKSPACE.x) | _floats(WORKSPACE.y) | {WORKSPACE.reach}
@@ -156,7 +158,7 @@ def _lengths_and_angles() -> dict[float, str]:
                 named.setdefault(round(float(np.degrees(v)), 3) if angle else v, name)
 
     for f in FingerModel.__dataclass_fields__:
-        add(f"FingerModel.{f}", getattr(FingerModel(), f))
+        add(f"FingerModel.{f}", getattr(ROBOT.gripper.fingers, f))
     for f in ("penetration", "contact", "com_margin", "perceived_penetration",
               "perceived_contact", "sweep_touch", "sweep_clearance", "grasp_margins", "vertical"):  # fmt: skip
         add(f"TOLERANCES.{f}", getattr(TOLERANCES, f))

@@ -1,4 +1,4 @@
-"""Top-down grasp selection (geometry.hand): geometry only, no physics."""
+"""Top-down grasp selection (geometry.grasps, geometry.clearance): geometry only, no physics."""
 
 from __future__ import annotations
 
@@ -14,7 +14,9 @@ if _SHARED.is_dir():
     os.environ.setdefault("MENAGERIE_ROOT", str(_SHARED))
 
 from contracts import se3  # noqa: E402
-from geometry.hand import STROKE, FingerModel, Obstacle, boxes_hit_triangles, plan_grasps  # noqa: E402
+from geometry.clearance import boxes_hit_triangles  # noqa: E402
+from geometry.grasps import Obstacle, plan_grasps  # noqa: E402
+from geometry.robot import ROBOT, STROKE  # noqa: E402
 
 CUBE = trimesh.creation.box((0.04, 0.04, 0.04))  # origin at the centre
 CUBE_SYMS = se3.cube_group()
@@ -138,7 +140,7 @@ def test_a_tall_pillar_is_gripped_high_enough_to_clear_the_linkage():
     pillar.apply_translation((0, 0, 0.04))
     report = plan_grasps(pillar, _at(0.5, 0.0, 0.0), _at(0.45, 0.1, 0.0))
     assert report.grasps
-    fingers = FingerModel()
+    fingers = ROBOT.gripper.fingers
     for g in report.grasps:
         tip = g.pick_tcp[2, 3] - STROKE.tip_at_gap(g.width)
         assert tip + fingers.ceiling_at(g.open_gap) >= 0.08  # the top stays below the linkage
