@@ -1,31 +1,25 @@
-"""One check suite per generated function; each returns its interface/schema/property checks.
+"""One check suite per generated function, each a list of registered checks (`checks.registry`).
 
-A suite is `checks(ctx: SuiteContext) -> list[CheckResult]`; domain properties are added by
-`checks.properties`, the image checks and perception accuracy on the host by `checks.run`.
-Each suite module also states what its checks enforce (`RULES`, see `checks.rules`); the
-interface checks every function gets (`checks.context`) are stated here.
+Each suite module registers its checks, one function each with its rule, in the order they
+run; a suite runs as `run_suite(function, ctx)` (`SUITES[function](ctx)`). Domain properties are
+added by `checks.properties`, and the host checks (`on="host"`: perception accuracy, the image
+checks) are run by `checks.run`. The interface checks every function gets (`checks.context`)
+state their rules here.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 
+from checks.registry import SUITE, rules, run_suite
 from checks.rules import Rule
 from checks.suites import perceive, plan, relate, render
+from contracts.functions import FUNCTIONS
 
-SUITES: dict[str, Callable] = {
-    "render": render.checks,
-    "perceive": perceive.checks,
-    "relate": relate.checks,
-    "plan": plan.checks,
-}
-
-RULES: dict[str, tuple[Rule, ...]] = {
-    "render": render.RULES,
-    "perceive": perceive.RULES,
-    "relate": relate.RULES,
-    "plan": plan.RULES,
-}
+_MODULES = (render, perceive, relate, plan)  # importing them registers their checks
+SUITES: dict[str, Callable] = {f: partial(run_suite, f) for f in FUNCTIONS if f in SUITE}
+RULES: dict[str, tuple[Rule, ...]] = {f: rules(f) for f in SUITES}
 
 
 def interface_rules(function: str) -> tuple[Rule, ...]:

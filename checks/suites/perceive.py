@@ -18,13 +18,13 @@ import numpy as np
 from checks import images
 from checks.context import SuiteContext
 from checks.hypo import Failure
+from checks.registry import register, rules
 from checks.report import CheckResult
 from checks.rules import Rule
 from checks.suites._common import (
     copy_records,
     raise_first,
     raised,
-    run_check,
     same_value,
 )
 from contracts import se3
@@ -33,65 +33,6 @@ from contracts.validate import validate
 from sandbox import MESHES
 
 PROPER_TOL = 1e-6  # a proper rotation: max |RᵀR − I| and |det R − 1| at most this
-
-RULES: tuple[Rule, ...] = (
-    Rule(
-        check="schema.output",
-        text='`perceive` returns a list of records `{"id": str, "mesh": str, "pose": '
-        "(4, 4) rigid transform T_world_object}` with unique ids.",
-    ),
-    Rule(
-        check="property.ids_match_catalogue",
-        text="Every record's id is an object of the catalogue and its `mesh` that object's "
-        "catalogue mesh key, and the ids are exactly the objects the scene holds, those the "
-        "camera cannot see included (see what the task text says about hidden objects).",
-    ),
-    Rule(
-        check="property.proper_rotations",
-        text="Every pose's rotation is proper: orthonormal with determinant one, to within "
-        "{checks.suites.perceive:PROPER_TOL}.",
-    ),
-    Rule(
-        check="property.deterministic",
-        text="Two calls on the same observation return identical records (same order, same poses).",
-    ),
-    Rule(
-        check="property.accuracy",
-        text="The checks draw {checks.budget:DEFAULT.observations} observations afresh for every "
-        "check (a new draw for each attempt): scenes of the domain's generator and scenes "
-        "composed from the task's parts, starts and goals, the task text's hiding case where "
-        "there is one, seen through the named views and through cameras drawn from this "
-        "envelope: {domain.camera_envelope.description}. Each observation is what the trials "
-        "give `perceive`: full resolution, sensor noise, the calibrated camera. "
-        "On every one of them each object of the scene is found with its pose "
-        "within {domain.tolerance.translation|mm}[? and {domain.tolerance.rotation|deg}?] of "
-        "the true pose, modulo the object's symmetry, and the domain's reference relations "
-        "computed on your records equal those of the true scene. An object the camera does "
-        "not show at all that holds nothing up only has to be reported (the image cannot say "
-        "where it stands). Nor is an object held to the tolerance where the image cannot tell "
-        "your pose from the true one: the true scene drawn with that one object where you put "
-        "it differs from the true scene's drawing in fewer than "
-        "{checks.suites.perceive:TELL_PX|px} pixels at the image check's resolution (silhouette, "
-        "or depth by more than {checks.suites.perceive:TELL_DEPTH|mm}), with the same "
-        "relations — a part hidden under a round one, turned.",
-    ),
-    Rule(
-        check="image.perceive_rerender",
-        text="The frozen `render` of your records is compared, per object, with the "
-        "simulator's silhouettes and depth of the observed scene (at a resolution where a pixel "
-        "covers at most {checks.inputs:IMAGE_PIXEL_MAX|mm} at the scene: half the "
-        "observation's, or finer for a far or wide camera; an object showing less than "
-        "{checks.suites.perceive:MIN_VISIBLE_SHARE|pct} of its own silhouette is judged by "
-        "`property.accuracy` only; the whole re-render may be shifted by what the calibration "
-        "error can move the image by): silhouette IoU at "
-        "least {checks.images:IOU_MIN}, mean IoU at least {checks.images:IOU_MEAN_MIN}, median "
-        "depth error at most {checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object, "
-        "pixels within {checks.images:DEPTH_EDGE_PX|px} of either outline left out while "
-        "{checks.images:DEPTH_MIN_PX|px} remain (objects shown with fewer than {checks.images:MIN_AREA|px} are not scored). An object "
-        "the camera does not show at all that holds nothing up must be drawn with fewer than "
-        "{checks.images:MIN_AREA|px} too: it stands where the camera cannot see it.",
-    ),
-)
 
 
 def perceived(ctx: SuiteContext, i: int) -> Any:
@@ -111,118 +52,135 @@ def where(ctx: SuiteContext, case: dict) -> dict[str, Any]:
     return out
 
 
-def checks(ctx: SuiteContext) -> list[CheckResult]:
+def _valid(ctx: SuiteContext) -> dict[int, list[dict]]:
+    """The records of every observation whose result passed the schema, by case index (what
+    `schema.output` leaves for the checks after it)."""
+    return ctx.outputs.setdefault("valid_records", {})
+
+
+@register(
+    "perceive",
+    "schema.output",
+    rule='`perceive` returns a list of records `{"id": str, "mesh": str, "pose": '
+    "(4, 4) rigid transform T_world_object}` with unique ids.",
+    expected="a list of {'id': str, 'mesh': str, 'pose': 4x4 rigid transform}, ids unique",
+)
+def schema(ctx: SuiteContext, r: CheckResult) -> None:
     cases = ctx.cases["observations"]
-    spec = ctx.spec
-    out: list[CheckResult] = []
-    ctx.outputs["perceived"] = perceived_out = {}
-    valid: dict[int, list[dict]] = {}
-
-    def schema(r: CheckResult) -> None:
-        found: list[Failure] = []
-        for i, case in enumerate(cases):
-            res = perceived(ctx, i)
-            if not res.ok:
-                found.append(raised(f"perceive on {case['name']}", res, where(ctx, case)))
-                continue
-            try:
-                validate("records", res.value)
-            except ContractError as e:
-                found.append(
-                    Failure(
-                        message=f"the records perceived in {case['name']} break the contract: {e}",
-                        actual=str(e),
-                        counterexample=where(ctx, case),
-                    )
-                )
-                continue
-            valid[i] = copy_records(res.value)
-            perceived_out[case["name"]] = [
-                {"id": str(o["id"]), "mesh": str(o["mesh"]), "pose": np.asarray(o["pose"], float)}
-                for o in res.value
-            ]
-        r.examples = len(cases)
-        raise_first(r, found, "observations")
-
-    out.append(
-        run_check(
-            "schema.output",
-            "schema",
-            schema,
-            expected="a list of {'id': str, 'mesh': str, 'pose': 4x4 rigid transform}, ids unique",
-        )
-    )
-
-    def ids_problem(case: dict, recs: list[dict]) -> Failure | None:
-        for k, o in enumerate(recs):
-            if o["id"] not in spec.catalogue:
-                return Failure(
-                    message=f"records[{k}].id '{o['id']}' is not an object of the catalogue",
-                    expected=sorted(spec.catalogue),
-                    actual=o["id"],
+    valid = _valid(ctx)
+    perceived_out = ctx.outputs.setdefault("perceived", {})
+    found: list[Failure] = []
+    for i, case in enumerate(cases):
+        res = perceived(ctx, i)
+        if not res.ok:
+            found.append(raised(f"perceive on {case['name']}", res, where(ctx, case)))
+            continue
+        try:
+            validate("records", res.value)
+        except ContractError as e:
+            found.append(
+                Failure(
+                    message=f"the records perceived in {case['name']} break the contract: {e}",
+                    actual=str(e),
                     counterexample=where(ctx, case),
                 )
-            if o["mesh"] != spec.catalogue[o["id"]]:
-                return Failure(
-                    message=f"records[{k}]: '{o['id']}' has mesh '{spec.catalogue[o['id']]}' "
-                    f"in the catalogue, not '{o['mesh']}'",
-                    expected=spec.catalogue[o["id"]],
-                    actual=o["mesh"],
-                    counterexample=where(ctx, case),
-                )
-        truth = sorted(t["id"] for t in case["truth"])
-        got = sorted(o["id"] for o in recs)
-        if got != truth:
-            hidden = sorted(set(truth) - set(got))
+            )
+            continue
+        valid[i] = copy_records(res.value)
+        perceived_out[case["name"]] = [
+            {"id": str(o["id"]), "mesh": str(o["mesh"]), "pose": np.asarray(o["pose"], float)}
+            for o in res.value
+        ]
+    r.examples = len(cases)
+    raise_first(r, found, "observations")
+
+
+def _ids_problem(ctx: SuiteContext, case: dict, recs: list[dict]) -> Failure | None:
+    catalogue = ctx.spec.catalogue
+    for k, o in enumerate(recs):
+        if o["id"] not in catalogue:
             return Failure(
-                message=f"the scene in {case['name']} holds {truth}; perceive returned {got}"
-                + (f" (missing: {hidden}; every object of the scene must be reported, also "
-                   "one the camera cannot see)" if hidden else ""),
-                expected=truth,
-                actual=got,
+                message=f"records[{k}].id '{o['id']}' is not an object of the catalogue",
+                expected=sorted(catalogue),
+                actual=o["id"],
                 counterexample=where(ctx, case),
-            )  # fmt: skip
-        return None
+            )
+        if o["mesh"] != catalogue[o["id"]]:
+            return Failure(
+                message=f"records[{k}]: '{o['id']}' has mesh '{catalogue[o['id']]}' "
+                f"in the catalogue, not '{o['mesh']}'",
+                expected=catalogue[o["id"]],
+                actual=o["mesh"],
+                counterexample=where(ctx, case),
+            )
+    truth = sorted(t["id"] for t in case["truth"])
+    got = sorted(o["id"] for o in recs)
+    if got != truth:
+        hidden = sorted(set(truth) - set(got))
+        return Failure(
+            message=f"the scene in {case['name']} holds {truth}; perceive returned {got}"
+            + (f" (missing: {hidden}; every object of the scene must be reported, also "
+               "one the camera cannot see)" if hidden else ""),
+            expected=truth,
+            actual=got,
+            counterexample=where(ctx, case),
+        )  # fmt: skip
+    return None
 
-    def ids(r: CheckResult) -> None:
-        found = [f for i, recs in valid.items() if (f := ids_problem(cases[i], recs))]
-        r.examples = len(valid)
-        raise_first(r, found, "observations")
 
-    out.append(run_check("property.ids_match_catalogue", "property", ids))
+@register(
+    "perceive",
+    "property.ids_match_catalogue",
+    rule="Every record's id is an object of the catalogue and its `mesh` that object's "
+    "catalogue mesh key, and the ids are exactly the objects the scene holds, those the "
+    "camera cannot see included (see what the task text says about hidden objects).",
+)
+def ids_match_catalogue(ctx: SuiteContext, r: CheckResult) -> None:
+    cases, valid = ctx.cases["observations"], _valid(ctx)
+    found = [f for i, recs in valid.items() if (f := _ids_problem(ctx, cases[i], recs))]
+    r.examples = len(valid)
+    raise_first(r, found, "observations")
 
-    def rotations(r: CheckResult) -> None:
-        for i, recs in valid.items():
-            for k, o in enumerate(recs):
-                R = o["pose"][:3, :3]
-                if not se3.is_proper_rotation(R, tol=PROPER_TOL):
-                    ortho, det = se3.rotation_defect(R)
-                    raise Failure(
-                        message=f"records[{k}] ('{o['id']}'): the rotation is not proper "
-                        f"(max |RᵀR − I| = {ortho:.2e}, det = {det:.4f})",
-                        counterexample=where(ctx, cases[i]),
-                    )
-        r.examples = len(valid)
 
-    out.append(run_check("property.proper_rotations", "property", rotations))
-
-    def deterministic(r: CheckResult) -> None:
-        k = min(len(cases), ctx.examples("determinism"))
-        for i in range(k):
-            case = cases[i]
-            again = ctx.call(case["observation"], MESHES, case["camera"], label="again")
-            first = perceived(ctx, i)
-            if first.ok and again.ok and not same_value(first.value, again.value):
+@register(
+    "perceive",
+    "property.proper_rotations",
+    rule="Every pose's rotation is proper: orthonormal with determinant one, to within "
+    "{checks.suites.perceive:PROPER_TOL}.",
+)
+def proper_rotations(ctx: SuiteContext, r: CheckResult) -> None:
+    cases, valid = ctx.cases["observations"], _valid(ctx)
+    for i, recs in valid.items():
+        for k, o in enumerate(recs):
+            R = o["pose"][:3, :3]
+            if not se3.is_proper_rotation(R, tol=PROPER_TOL):
+                ortho, det = se3.rotation_defect(R)
                 raise Failure(
-                    message=f"perceive gave two different results for the same image "
-                    f"({case['name']})",
-                    counterexample=where(ctx, case),
+                    message=f"records[{k}] ('{o['id']}'): the rotation is not proper "
+                    f"(max |RᵀR − I| = {ortho:.2e}, det = {det:.4f})",
+                    counterexample=where(ctx, cases[i]),
                 )
-        r.examples = k
+    r.examples = len(valid)
 
-    out.append(run_check("property.deterministic", "property", deterministic))
 
-    return out
+@register(
+    "perceive",
+    "property.deterministic",
+    rule="Two calls on the same observation return identical records (same order, same poses).",
+)
+def deterministic(ctx: SuiteContext, r: CheckResult) -> None:
+    cases = ctx.cases["observations"]
+    k = min(len(cases), ctx.examples("determinism"))
+    for i in range(k):
+        case = cases[i]
+        again = ctx.call(case["observation"], MESHES, case["camera"], label="again")
+        first = perceived(ctx, i)
+        if first.ok and again.ok and not same_value(first.value, again.value):
+            raise Failure(
+                message=f"perceive gave two different results for the same image ({case['name']})",
+                counterexample=where(ctx, case),
+            )
+    r.examples = k
 
 
 def object_feedback(
@@ -307,6 +265,28 @@ def object_feedback(
     return rows, pictures
 
 
+@register(
+    "perceive",
+    "property.accuracy",
+    on="host",
+    rule="The checks draw {checks.budget:DEFAULT.observations} observations afresh for every "
+    "check (a new draw for each attempt): scenes of the domain's generator and scenes "
+    "composed from the task's parts, starts and goals, the task text's hiding case where "
+    "there is one, seen through the named views and through cameras drawn from this "
+    "envelope: {domain.camera_envelope.description}. Each observation is what the trials "
+    "give `perceive`: full resolution, sensor noise, the calibrated camera. "
+    "On every one of them each object of the scene is found with its pose "
+    "within {domain.tolerance.translation|mm}[? and {domain.tolerance.rotation|deg}?] of "
+    "the true pose, modulo the object's symmetry, and the domain's reference relations "
+    "computed on your records equal those of the true scene. An object the camera does "
+    "not show at all that holds nothing up only has to be reported (the image cannot say "
+    "where it stands). Nor is an object held to the tolerance where the image cannot tell "
+    "your pose from the true one: the true scene drawn with that one object where you put "
+    "it differs from the true scene's drawing in fewer than "
+    "{checks.suites.perceive:TELL_PX|px} pixels at the image check's resolution (silhouette, "
+    "or depth by more than {checks.suites.perceive:TELL_DEPTH|mm}), with the same "
+    "relations — a part hidden under a round one, turned.",
+)
 def accuracy(
     ctx: SuiteContext,
     domain: Any,
@@ -545,6 +525,24 @@ def mostly_hidden(ctx: SuiteContext, case: dict, m: images.ObjectMatch) -> bool:
     return m.area_reference < MIN_VISIBLE_SHARE * int((alone == 0).sum())
 
 
+@register(
+    "perceive",
+    "image.perceive_rerender",
+    on="host",
+    rule="The frozen `render` of your records is compared, per object, with the "
+    "simulator's silhouettes and depth of the observed scene (at a resolution where a pixel "
+    "covers at most {checks.inputs:IMAGE_PIXEL_MAX|mm} at the scene: half the "
+    "observation's, or finer for a far or wide camera; an object showing less than "
+    "{checks.suites.perceive:MIN_VISIBLE_SHARE|pct} of its own silhouette is judged by "
+    "`property.accuracy` only; the whole re-render may be shifted by what the calibration "
+    "error can move the image by): silhouette IoU at "
+    "least {checks.images:IOU_MIN}, mean IoU at least {checks.images:IOU_MEAN_MIN}, median "
+    "depth error at most {checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object, "
+    "pixels within {checks.images:DEPTH_EDGE_PX|px} of either outline left out while "
+    "{checks.images:DEPTH_MIN_PX|px} remain (objects shown with fewer than {checks.images:MIN_AREA|px} are not scored). An object "
+    "the camera does not show at all that holds nothing up must be drawn with fewer than "
+    "{checks.images:MIN_AREA|px} too: it stands where the camera cannot see it.",
+)
 def rerender(ctx: SuiteContext, renders: Mapping[str, Any], out_dir: Any) -> CheckResult:
     """`render(perceive(I))` against `I`, per object: `renders` are the frozen render's (or the
     toolbox renderer's) images of the perceived records, by observation name."""
@@ -639,3 +637,6 @@ def rerender(ctx: SuiteContext, renders: Mapping[str, Any], out_dir: Any) -> Che
             r.images = grid + r.images
     r.duration_s = time.perf_counter() - t0
     return r
+
+
+RULES: tuple[Rule, ...] = rules("perceive")

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from checks.context import SuiteContext
 from checks.hypo import Failure, run_property
+from checks.registry import register, rules
 from checks.report import CheckResult
 from checks.rules import Rule
 from checks.suites._common import (
@@ -23,7 +24,6 @@ from checks.suites._common import (
     permuted,
     raise_first,
     raised,
-    run_check,
     same_value,
     scene_spec,
     translated,
@@ -31,33 +31,6 @@ from checks.suites._common import (
 from contracts.errors import ContractError
 from contracts.validate import validate
 from sandbox import MESHES
-
-RULES: tuple[Rule, ...] = (
-    Rule(
-        check="schema.output",
-        text='`relate` returns `networkx.node_link_data(G, edges="edges")` of a '
-        "`networkx.MultiDiGraph` whose nodes are exactly the record ids and each of whose "
-        "edges has a `type`.",
-    ),
-    Rule(
-        check="property.relations_declared",
-        text="The module defines `RELATIONS`, a non-empty dict of strings {edge type: meaning}, "
-        "and every edge type `relate` returns is one of its keys.",
-    ),
-    Rule(
-        check="property.deterministic",
-        text="Two calls on the same records return the same graph.",
-    ),
-    Rule(
-        check="property.record_order_invariant",
-        text="The same records in another order give the same edges.",
-    ),
-    Rule(
-        check="property.translation_invariant",
-        text="Moving every record by one common horizontal shift (up to "
-        "{checks.budget:DEFAULT.translation_mm} mm along x and along y) gives the same edges.",
-    ),
-)
 
 
 def relations_of(ctx: SuiteContext, records: list[dict], label: str, derived: bool = False) -> Any:
@@ -81,105 +54,132 @@ def _schema_problem(graph: Any, records: list[dict]) -> str:
     return ""
 
 
-def checks(ctx: SuiteContext) -> list[CheckResult]:
-    scenes = ctx.cases["scenes"]
-    domain = ctx.spec.name
-    out: list[CheckResult] = []
+def _base(ctx: SuiteContext, i: int) -> Any:
+    """relate() of the i-th scene as drawn (cached: every check starts from it)."""
+    sc = ctx.cases["scenes"][i]
+    return relations_of(ctx, sc["records"], f"scene {sc['name']}")
 
-    def base(i: int) -> Any:
-        return relations_of(ctx, scenes[i]["records"], f"scene {scenes[i]['name']}")
 
-    def schema(r: CheckResult) -> None:
-        found: list[Failure] = []
-        for i, sc in enumerate(scenes):
-            res = base(i)
-            ce = scene_spec(domain, sc["records"])
-            if not res.ok:
-                found.append(raised("relate(records)", res, ce))
-                continue
-            problem = _schema_problem(res.value, sc["records"])
-            if problem:
-                found.append(
-                    Failure(
-                        message=f"the graph returned for scene {sc['name']} is not a relation "
-                        f"graph: {problem}",
-                        actual=problem,
-                        counterexample=ce,
-                    )
+@register(
+    "relate",
+    "schema.output",
+    rule=(
+        '`relate` returns `networkx.node_link_data(G, edges="edges")` of a '
+        "`networkx.MultiDiGraph` whose nodes are exactly the record ids and each of whose "
+        "edges has a `type`."
+    ),
+    expected="networkx node-link JSON (edges='edges') of a directed multigraph whose "
+    "nodes are the record ids, each edge with a 'type'",
+)
+def schema(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes, domain = ctx.cases["scenes"], ctx.spec.name
+    found: list[Failure] = []
+    for i, sc in enumerate(scenes):
+        res = _base(ctx, i)
+        ce = scene_spec(domain, sc["records"])
+        if not res.ok:
+            found.append(raised("relate(records)", res, ce))
+            continue
+        problem = _schema_problem(res.value, sc["records"])
+        if problem:
+            found.append(
+                Failure(
+                    message=f"the graph returned for scene {sc['name']} is not a relation "
+                    f"graph: {problem}",
+                    actual=problem,
+                    counterexample=ce,
                 )
-        r.examples = len(scenes)
-        raise_first(r, found, "scenes")
-
-    out.append(
-        run_check(
-            "schema.output",
-            "schema",
-            schema,
-            expected="networkx node-link JSON (edges='edges') of a directed multigraph whose "
-            "nodes are the record ids, each edge with a 'type'",
-        )
-    )
-    schema_ok = not out[-1].failing
-
-    def declared(r: CheckResult) -> None:
-        got = ctx.draft.attribute("RELATIONS")
-        rel = got.value if got.ok else None
-        ctx.outputs["RELATIONS"] = rel
-        if not isinstance(rel, dict) or not rel:
-            raise Failure(
-                message="the module must define RELATIONS: a non-empty dict {edge type: meaning}",
-                actual=type(rel).__name__ if got.ok else f"not readable ({got.describe()})",
             )
-        bad = [k for k, v in rel.items() if not isinstance(k, str) or not isinstance(v, str)]
-        if bad:
-            raise Failure(message=f"RELATIONS maps str to str; bad entries: {bad!r}")
-        for i, sc in enumerate(scenes):
-            res = base(i)
-            if not res.ok or _schema_problem(res.value, sc["records"]):
-                continue
-            types = sorted({t for (_, _, t) in edge_multiset(res.value)} - set(rel))
-            if types:
-                raise Failure(
-                    message=f"edge types {types} are not declared in RELATIONS ({sorted(rel)})",
-                    expected=sorted(rel),
-                    actual=types,
-                    counterexample=scene_spec(domain, sc["records"]),
-                )
-        r.examples = len(scenes)
+    r.examples = len(scenes)
+    raise_first(r, found, "scenes")
 
-    out.append(run_check("property.relations_declared", "property", declared))
 
-    def deterministic(r: CheckResult) -> None:
-        n = min(len(scenes), ctx.examples("determinism"))
-        for i in range(n):
-            again = ctx.call(scenes[i]["records"], MESHES, label="again")
-            first = base(i)
-            if not (first.ok and again.ok):
-                continue
-            if not same_value(first.value, again.value):
-                raise Failure(
-                    message="relate gave two different graphs for the same records (at "
-                    f"{first_difference(first.value, again.value)})",
-                    counterexample=scene_spec(domain, scenes[i]["records"]),
-                )
-        r.examples = n
+@register(
+    "relate",
+    "property.relations_declared",
+    rule="The module defines `RELATIONS`, a non-empty dict of strings {edge type: meaning}, "
+    "and every edge type `relate` returns is one of its keys.",
+)
+def declared(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes, domain = ctx.cases["scenes"], ctx.spec.name
+    got = ctx.draft.attribute("RELATIONS")
+    rel = got.value if got.ok else None
+    ctx.outputs["RELATIONS"] = rel
+    if not isinstance(rel, dict) or not rel:
+        raise Failure(
+            message="the module must define RELATIONS: a non-empty dict {edge type: meaning}",
+            actual=type(rel).__name__ if got.ok else f"not readable ({got.describe()})",
+        )
+    bad = [k for k, v in rel.items() if not isinstance(k, str) or not isinstance(v, str)]
+    if bad:
+        raise Failure(message=f"RELATIONS maps str to str; bad entries: {bad!r}")
+    for i, sc in enumerate(scenes):
+        res = _base(ctx, i)
+        if not res.ok or _schema_problem(res.value, sc["records"]):
+            continue
+        types = sorted({t for (_, _, t) in edge_multiset(res.value)} - set(rel))
+        if types:
+            raise Failure(
+                message=f"edge types {types} are not declared in RELATIONS ({sorted(rel)})",
+                expected=sorted(rel),
+                actual=types,
+                counterexample=scene_spec(domain, sc["records"]),
+            )
+    r.examples = len(scenes)
 
-    out.append(run_check("property.deterministic", "property", deterministic))
 
-    n = len(scenes)
+@register(
+    "relate",
+    "property.deterministic",
+    rule="Two calls on the same records return the same graph.",
+)
+def deterministic(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes, domain = ctx.cases["scenes"], ctx.spec.name
+    n = min(len(scenes), ctx.examples("determinism"))
+    for i in range(n):
+        again = ctx.call(scenes[i]["records"], MESHES, label="again")
+        first = _base(ctx, i)
+        if not (first.ok and again.ok):
+            continue
+        if not same_value(first.value, again.value):
+            raise Failure(
+                message="relate gave two different graphs for the same records (at "
+                f"{first_difference(first.value, again.value)})",
+                counterexample=scene_spec(domain, scenes[i]["records"]),
+            )
+    r.examples = n
 
-    def order_prop(x: tuple) -> Failure | None:
+
+def _same_edges(ctx: SuiteContext, i: int, changed: list[dict], label: str, ce: dict) -> Any:
+    """The first call that failed, or the edge multisets of the scene and its changed copy."""
+    a = _base(ctx, i)
+    b = relations_of(ctx, changed, label, derived=True)
+    for res in (a, b):
+        if not res.ok:
+            return raised("relate(records)", res, ce)
+    return edge_multiset(a.value), edge_multiset(b.value)
+
+
+@register(
+    "relate",
+    "property.record_order_invariant",
+    rule="The same records in another order give the same edges.",
+    seeded=True,
+    needs_schema=True,
+)
+def record_order_invariant(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes, domain = ctx.cases["scenes"], ctx.spec.name
+
+    def prop(x: tuple) -> Failure | None:
         i, keys = x
         recs = scenes[i]["records"]
         order = order_from_keys(keys, len(recs))
         shuffled = permuted(recs, order)
-        a = base(i)
-        b = relations_of(ctx, shuffled, f"scene {scenes[i]['name']} order {order}", derived=True)
         ce = {"scene": scene_spec(domain, shuffled), "order": [recs[k]["id"] for k in order]}
-        for res in (a, b):
-            if not res.ok:
-                return raised("relate(records)", res, ce)
-        ea, eb = edge_multiset(a.value), edge_multiset(b.value)
+        got = _same_edges(ctx, i, shuffled, f"scene {scenes[i]['name']} order {order}", ce)
+        if isinstance(got, Failure):
+            return got
+        ea, eb = got
         if ea != eb:
             return Failure(
                 message="relate depends on the order of the records: the same scene with its "
@@ -190,32 +190,39 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
             )
         return None
 
-    def order_check(r: CheckResult) -> None:
-        strategy = st.tuples(
-            st.integers(0, n - 1), order_keys(max(len(s["records"]) for s in scenes))
-        )
-        outcome = run_property(
-            order_prop, strategy, max_examples=ctx.examples("order"), seed=ctx.seed
-        )
-        r.examples = outcome.examples
-        if outcome.failure:
-            raise outcome.failure
+    strategy = st.tuples(
+        st.integers(0, len(scenes) - 1), order_keys(max(len(s["records"]) for s in scenes))
+    )
+    outcome = run_property(prop, strategy, max_examples=ctx.examples("order"), seed=ctx.seed)
+    r.examples = outcome.examples
+    if outcome.failure:
+        raise outcome.failure
 
-    def translation_prop(x: tuple) -> Failure | None:
+
+@register(
+    "relate",
+    "property.translation_invariant",
+    rule=(
+        "Moving every record by one common horizontal shift (up to "
+        "{checks.budget:DEFAULT.translation_mm} mm along x and along y) gives the same edges."
+    ),
+    seeded=True,
+    needs_schema=True,
+)
+def translation_invariant(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes, domain = ctx.cases["scenes"], ctx.spec.name
+
+    def prop(x: tuple) -> Failure | None:
         i, dx, dy = x
         if dx == 0 and dy == 0:
             return None
-        recs = scenes[i]["records"]
-        moved = translated(recs, dx / 1000, dy / 1000)
-        a = base(i)
-        b = relations_of(
-            ctx, moved, f"scene {scenes[i]['name']} moved by ({dx}, {dy}) mm", derived=True
-        )
+        moved = translated(scenes[i]["records"], dx / 1000, dy / 1000)
         ce = {"scene": scene_spec(domain, moved), "translation_m": [dx / 1000, dy / 1000, 0.0]}
-        for res in (a, b):
-            if not res.ok:
-                return raised("relate(records)", res, ce)
-        ea, eb = edge_multiset(a.value), edge_multiset(b.value)
+        label = f"scene {scenes[i]['name']} moved by ({dx}, {dy}) mm"
+        got = _same_edges(ctx, i, moved, label, ce)
+        if isinstance(got, Failure):
+            return got
+        ea, eb = got
         if ea != eb:
             return Failure(
                 message=f"relate is not invariant to a common horizontal translation: moving "
@@ -226,39 +233,20 @@ def checks(ctx: SuiteContext) -> list[CheckResult]:
             )
         return None
 
-    def translation_check(r: CheckResult) -> None:
-        reach = int(ctx.budget.translation_mm)
-        strategy = st.tuples(
-            st.integers(0, n - 1), st.integers(-reach, reach), st.integers(-reach, reach)
-        )
-        outcome = run_property(
-            translation_prop,
-            strategy,
-            max_examples=ctx.examples("translation"),
-            seed=ctx.seed,
-            examples=[(0, 97, -61)],
-        )
-        r.examples = outcome.examples
-        if outcome.failure:
-            raise outcome.failure
+    reach = int(ctx.budget.translation_mm)
+    strategy = st.tuples(
+        st.integers(0, len(scenes) - 1), st.integers(-reach, reach), st.integers(-reach, reach)
+    )
+    outcome = run_property(
+        prop,
+        strategy,
+        max_examples=ctx.examples("translation"),
+        seed=ctx.seed,
+        examples=[(0, 97, -61)],
+    )
+    r.examples = outcome.examples
+    if outcome.failure:
+        raise outcome.failure
 
-    if schema_ok:
-        out.append(
-            run_check("property.record_order_invariant", "property", order_check, seed=ctx.seed)
-        )
-        out.append(
-            run_check(
-                "property.translation_invariant", "property", translation_check, seed=ctx.seed
-            )
-        )
-    else:
-        for name in ("property.record_order_invariant", "property.translation_invariant"):
-            out.append(
-                CheckResult(
-                    name=name,
-                    category="property",
-                    status="skipped",
-                    message="skipped: the output does not pass its schema",
-                )
-            )
-    return out
+
+RULES: tuple[Rule, ...] = rules("relate")

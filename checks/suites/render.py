@@ -7,6 +7,7 @@ The image comparison against the simulator (silhouette IoU and depth error per o
 from __future__ import annotations
 
 import time
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -15,6 +16,7 @@ from hypothesis import strategies as st
 from checks import images, raster
 from checks.context import SuiteContext
 from checks.hypo import Failure, run_property
+from checks.registry import register, rules
 from checks.report import CheckResult
 from checks.rules import Rule
 from checks.suites._common import (
@@ -24,7 +26,6 @@ from checks.suites._common import (
     permuted,
     raise_first,
     raised,
-    run_check,
     scene_spec,
 )
 from contracts.validate import to_jsonable
@@ -49,58 +50,6 @@ EDGE_MISMATCH = 0.05  # share of an object's outline its render may stray beyond
 # the default budget, all three domains; the commit that set these gives the script).
 JUDGED_MIN_PX = 300  # [px]
 JUDGED_MIN_SHARE = 0.5  # [1]
-
-RULES: tuple[Rule, ...] = (
-    Rule(
-        check="schema.output",
-        text="`render` returns a dict with `rgb` (H, W, 3) uint8, `depth` (H, W) float in metres, "
-        "finite and never negative, and `mask` (H, W) int holding -1 or an index into `records`, "
-        "where H and W are the given camera's height and width.",
-    ),
-    Rule(
-        check="property.deterministic",
-        text="Two calls on the same records and camera return identical `rgb`, `depth` and `mask`.",
-    ),
-    Rule(
-        check="property.empty_scene",
-        text="With no records, `mask` is -1 and `depth` is 0 everywhere.",
-    ),
-    Rule(
-        check="property.depth_where_visible",
-        text="Every pixel the mask gives to a record has a positive depth, but for at most "
-        "{checks.suites.render:DEPTH_WHERE_VISIBLE|pct} of all such pixels and "
-        "{checks.suites.render:DEPTH_OBJECT|pct} of any one object's (objects of "
-        "{checks.suites.render:DEPTH_OBJECT_MIN_PX|px} or more); pixels within "
-        "{checks.suites.render:EDGE_BAND|px} of a silhouette edge are not judged (rasterisers "
-        "differ there), and every scene must leave at least "
-        "{checks.suites.render:JUDGED_MIN_PX|px} and {checks.suites.render:JUDGED_MIN_SHARE|pct} "
-        "of its object pixels to judge (a mask with holes or speckle is all edge).",
-    ),
-    Rule(
-        check="property.mask_follows_record_order",
-        text="`mask` holds each pixel's index into `records` as given: the same records in "
-        "another order must give the correspondingly renumbered mask on at least "
-        "{checks.suites.render:AGREEMENT|pct} of the pixels farther than "
-        "{checks.suites.render:EDGE_BAND|px} from a silhouette edge, of which at least "
-        "{checks.suites.render:JUDGED_MIN_PX|px} and {checks.suites.render:JUDGED_MIN_SHARE|pct} "
-        "of the object pixels must show an object.",
-    ),
-    Rule(
-        check="image.render_vs_simulator",
-        text="`render` of the true records is compared, per object, with the simulator's image "
-        "of the same scene (cameras with the domain cameras' width and height divided by "
-        "{checks.inputs:HALF_RES}): silhouette IoU at least {checks.images:IOU_MIN}, mean IoU "
-        "at least {checks.images:IOU_MEAN_MIN}, median depth error at most "
-        "{checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object (on at least "
-        "{checks.images:DEPTH_MIN_PX|px} with depth; pixels within "
-        "{checks.images:DEPTH_EDGE_PX|px} of either outline are left out while that many "
-        "remain), and its silhouette "
-        "within {checks.suites.render:EDGE_BAND|px} of the simulator's along all but "
-        "{checks.suites.render:EDGE_MISMATCH|pct} of its outline (objects the simulator "
-        "shows with fewer than {checks.images:MIN_AREA|px} are not scored; colours need not "
-        "match).",
-    ),
-)
 
 
 def render_of(
@@ -152,246 +101,273 @@ def output_problem(value: Any, camera: dict, n: int) -> str:
     return ""
 
 
-def checks(ctx: SuiteContext) -> list[CheckResult]:
+def _base(ctx: SuiteContext, i: int) -> Any:
+    """render() of the i-th scene as drawn (cached: every check starts from it)."""
+    sc = ctx.cases["scenes"][i]
+    return render_of(ctx, sc["records"], sc["camera"], f"scene {sc['name']}")
+
+
+@register(
+    "render",
+    "schema.output",
+    rule="`render` returns a dict with `rgb` (H, W, 3) uint8, `depth` (H, W) float in metres, "
+    "finite and never negative, and `mask` (H, W) int holding -1 or an index into `records`, "
+    "where H and W are the given camera's height and width.",
+    expected="{'rgb': (H, W, 3) uint8, 'depth': (H, W) float [m], 'mask': (H, W) int} "
+    "at the camera's size",
+)
+def schema(ctx: SuiteContext, r: CheckResult) -> None:
     scenes = ctx.cases["scenes"]
     domain = ctx.spec.name
-    out: list[CheckResult] = []
-    renders: dict[str, Any] = {}
-    ctx.outputs["renders"] = renders
-
-    def base(i: int) -> Any:
-        sc = scenes[i]
-        return render_of(ctx, sc["records"], sc["camera"], f"scene {sc['name']}")
-
-    def schema(r: CheckResult) -> None:
-        found: list[Failure] = []
-        for i, sc in enumerate(scenes):
-            res = base(i)
-            ce = {"scene": scene_spec(domain, sc["records"]), "camera": to_jsonable(sc["camera"])}
-            if not res.ok:
-                found.append(raised("render(records, meshes, camera)", res, ce))
-                continue
-            problem = output_problem(res.value, sc["camera"], len(sc["records"]))
-            if problem:
-                found.append(Failure(message=problem, actual=problem, counterexample=ce))
-                continue
-            if sc.get("image") and not found:  # (the image check needs them all)
-                renders[sc["name"]] = {
-                    k: np.asarray(res.value[k]) for k in ("rgb", "depth", "mask")
-                }
-        r.examples = len(scenes)
-        raise_first(r, found, "scenes")
-
-    out.append(
-        run_check(
-            "schema.output",
-            "schema",
-            schema,
-            expected="{'rgb': (H, W, 3) uint8, 'depth': (H, W) float [m], 'mask': (H, W) int} "
-            "at the camera's size",
-        )
-    )
-    if out[-1].failing:
-        for name in (
-            "property.deterministic",
-            "property.empty_scene",
-            "property.depth_where_visible",
-            "property.mask_follows_record_order",
-        ):
-            out.append(
-                CheckResult(
-                    name=name,
-                    category="property",
-                    status="skipped",
-                    message="skipped: the output does not pass its schema",
-                )
-            )
-        return out
-
-    def deterministic(r: CheckResult) -> None:
-        sc = scenes[0]
-        again = ctx.call(copy_records(sc["records"]), MESHES, sc["camera"], label="again")
-        first = base(0)
+    renders = ctx.outputs.setdefault("renders", {})
+    found: list[Failure] = []
+    for i, sc in enumerate(scenes):
+        res = _base(ctx, i)
         ce = {"scene": scene_spec(domain, sc["records"]), "camera": to_jsonable(sc["camera"])}
-        if not again.ok:
-            raise raised("render (second call)", again, ce)
-        for k in ("rgb", "depth", "mask"):
-            a, b = np.asarray(first.value[k]), np.asarray(again.value[k])
-            if a.shape != b.shape or not np.array_equal(a, b):
-                raise Failure(
-                    message=f"two renders of the same records differ in '{k}'",
-                    counterexample=ce,
-                )
-        r.examples = 1
-
-    out.append(run_check("property.deterministic", "property", deterministic))
-
-    def empty(r: CheckResult) -> None:
-        cam = scenes[0]["camera"]
-        res = ctx.call([], MESHES, cam, label="no records")
-        ce = {"scene": scene_spec(domain, []), "camera": to_jsonable(cam)}
         if not res.ok:
-            raise raised("render([], meshes, camera)", res, ce)
-        problem = output_problem(res.value, cam, 0)
+            found.append(raised("render(records, meshes, camera)", res, ce))
+            continue
+        problem = output_problem(res.value, sc["camera"], len(sc["records"]))
         if problem:
-            raise Failure(message=f"with no records: {problem}", counterexample=ce)
-        mask, depth = np.asarray(res.value["mask"]), np.asarray(res.value["depth"])
-        if (mask != -1).any() or (depth != 0).any():
+            found.append(Failure(message=problem, actual=problem, counterexample=ce))
+            continue
+        if sc.get("image") and not found:  # (the image check needs them all)
+            renders[sc["name"]] = {k: np.asarray(res.value[k]) for k in ("rgb", "depth", "mask")}
+    r.examples = len(scenes)
+    raise_first(r, found, "scenes")
+
+
+@register(
+    "render",
+    "property.deterministic",
+    rule="Two calls on the same records and camera return identical `rgb`, `depth` and `mask`.",
+    needs_schema=True,
+)
+def deterministic(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes = ctx.cases["scenes"]
+    domain = ctx.spec.name
+    sc = scenes[0]
+    again = ctx.call(copy_records(sc["records"]), MESHES, sc["camera"], label="again")
+    first = _base(ctx, 0)
+    ce = {"scene": scene_spec(domain, sc["records"]), "camera": to_jsonable(sc["camera"])}
+    if not again.ok:
+        raise raised("render (second call)", again, ce)
+    for k in ("rgb", "depth", "mask"):
+        a, b = np.asarray(first.value[k]), np.asarray(again.value[k])
+        if a.shape != b.shape or not np.array_equal(a, b):
             raise Failure(
-                message="with no records, the mask must be -1 and the depth 0 everywhere",
-                actual={
-                    "mask_pixels_not_minus_1": int((mask != -1).sum()),
-                    "depth_pixels_not_0": int((depth != 0).sum()),
-                },
+                message=f"two renders of the same records differ in '{k}'",
                 counterexample=ce,
             )
-        r.examples = 1
+    r.examples = 1
 
-    out.append(run_check("property.empty_scene", "property", empty))
 
-    def visible_depth(r: CheckResult) -> None:
-        # Colour, depth and mask may come from separate raster passes that disagree on a few
-        # edge pixels; what this catches is a mask without depth over (much of) an object.
-        # Pixels within EDGE_BAND of a silhouette edge are not judged (`checks.raster`).
-        worst = 0.0
-        excused = 0
-        fewest = None  # the fewest object pixels judged in a scene
-        for i, sc in enumerate(scenes):
-            v = base(i).value
-            mask, depth = np.asarray(v["mask"]), np.asarray(v["depth"])
-            inner = ~raster.edge_band(mask, EDGE_BAND)
-            judged = int(((mask >= 0) & inner).sum())
-            fewest = judged if fewest is None else min(fewest, judged)
-            few = too_few_judged(judged, int((mask >= 0).sum()))
-            if few:
-                raise Failure(
-                    message=f"the render of {sc['name']} leaves too few pixels to judge: {few}",
-                    expected=f"at least {JUDGED_MIN_PX} px and {100 * JUDGED_MIN_SHARE:g}% of "
-                    f"the object pixels farther than {EDGE_BAND} px from a silhouette edge",
-                    actual={"judged_px": judged, "object_px": int((mask >= 0).sum())},
-                    counterexample={"scene": scene_spec(domain, sc["records"])},
-                )
-            excused += int(((mask >= 0) & ~(depth > 0) & ~inner).sum())
-            mask = np.where(inner, mask, -2)  # (-2: in the edge band, not judged)
-            missing = (mask >= 0) & ~(depth > 0)
-            shown = int((mask >= 0).sum())
-            share = int(missing.sum()) / max(1, shown)
-            worst = max(worst, share)
-            per_object = [
-                (k, int((missing & (mask == k)).sum()), int((mask == k).sum()))
-                for k in np.unique(mask[mask >= 0])
-            ]
-            bad = [
-                (k, m, n)
-                for k, m, n in per_object
-                if n >= DEPTH_OBJECT_MIN_PX and m > DEPTH_OBJECT * n
-            ]
-            if share > DEPTH_WHERE_VISIBLE or bad:
-                k, m, n = bad[0] if bad else max(per_object, key=lambda t: t[1] / max(t[2], 1))
-                raise Failure(
-                    message=f"pixels show an object in the mask but have no depth: "
-                    f"{int(missing.sum())} of {shown} ({100 * share:.1f}%), {m} of the {n} of "
-                    f"record {int(k)} ('{sc['records'][int(k)]['id']}'), not counting the "
-                    f"pixels within {EDGE_BAND} px of a silhouette edge",
-                    expected=f"at most {100 * DEPTH_WHERE_VISIBLE:g}% of object pixels, and "
-                    f"{100 * DEPTH_OBJECT:g}% of any object's, without depth (pixels within "
-                    f"{EDGE_BAND} px of a silhouette edge not judged)",
-                    counterexample={"scene": scene_spec(domain, sc["records"])},
-                )
-        r.examples = len(scenes)
-        r.metrics = {
-            "masked_without_depth_max": worst,
-            "edge_pixels_without_depth_not_judged": float(excused),
-            "judged_pixels_min": None if fewest is None else float(fewest),
-        }
-
-    out.append(
-        run_check(
-            "property.depth_where_visible",
-            "property",
-            visible_depth,
-            expected=f"depth > 0 under the mask, but for at most {100 * DEPTH_WHERE_VISIBLE:g}% "
-            f"of object pixels and {100 * DEPTH_OBJECT:g}% of any object's (pixels within "
-            f"{EDGE_BAND} px of a silhouette edge not judged: rasterisers differ there; at "
-            f"least {JUDGED_MIN_PX} px and {100 * JUDGED_MIN_SHARE:g}% of a scene's object pixels "
-            "judged)",
+@register(
+    "render",
+    "property.empty_scene",
+    rule="With no records, `mask` is -1 and `depth` is 0 everywhere.",
+    needs_schema=True,
+)
+def empty_scene(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes = ctx.cases["scenes"]
+    domain = ctx.spec.name
+    cam = scenes[0]["camera"]
+    res = ctx.call([], MESHES, cam, label="no records")
+    ce = {"scene": scene_spec(domain, []), "camera": to_jsonable(cam)}
+    if not res.ok:
+        raise raised("render([], meshes, camera)", res, ce)
+    problem = output_problem(res.value, cam, 0)
+    if problem:
+        raise Failure(message=f"with no records: {problem}", counterexample=ce)
+    mask, depth = np.asarray(res.value["mask"]), np.asarray(res.value["depth"])
+    if (mask != -1).any() or (depth != 0).any():
+        raise Failure(
+            message="with no records, the mask must be -1 and the depth 0 everywhere",
+            actual={
+                "mask_pixels_not_minus_1": int((mask != -1).sum()),
+                "depth_pixels_not_0": int((depth != 0).sum()),
+            },
+            counterexample=ce,
         )
-    )
+    r.examples = 1
 
-    def order_prop(x: tuple) -> Failure | None:
-        i, keys = x
-        sc = scenes[i]
-        order = order_from_keys(keys, len(sc["records"]))
-        if order == sorted(order):
-            return None
-        shuffled = permuted(sc["records"], order)
-        res = render_of(
-            ctx, shuffled, sc["camera"], f"scene {sc['name']} order {order}", derived=True
-        )
-        ce = {
-            "scene": scene_spec(domain, shuffled),
-            "camera": to_jsonable(sc["camera"]),
-            "order": [sc["records"][k]["id"] for k in order],
-        }
-        if not res.ok:
-            return raised("render(records)", res, ce)
-        problem = output_problem(res.value, sc["camera"], len(shuffled))
-        if problem:
-            return Failure(message=problem, counterexample=ce)
-        a, b = np.asarray(base(i).value["mask"]), np.asarray(res.value["mask"])
-        # record k of the original list is record order.index(k) of the shuffled one
-        lut = np.full(len(order) + 1, -1)
-        for new, old in enumerate(order):
-            lut[old] = new
-        expected = np.where(a >= 0, lut[np.clip(a, 0, len(order))], -1)
-        judged = ~(raster.edge_band(a, EDGE_BAND) | raster.edge_band(b, EDGE_BAND))
-        few = too_few_judged(int((judged & (a >= 0)).sum()), int((a >= 0).sum()))
+
+@register(
+    "render",
+    "property.depth_where_visible",
+    rule="Every pixel the mask gives to a record has a positive depth, but for at most "
+    "{checks.suites.render:DEPTH_WHERE_VISIBLE|pct} of all such pixels and "
+    "{checks.suites.render:DEPTH_OBJECT|pct} of any one object's (objects of "
+    "{checks.suites.render:DEPTH_OBJECT_MIN_PX|px} or more); pixels within "
+    "{checks.suites.render:EDGE_BAND|px} of a silhouette edge are not judged (rasterisers "
+    "differ there), and every scene must leave at least "
+    "{checks.suites.render:JUDGED_MIN_PX|px} and {checks.suites.render:JUDGED_MIN_SHARE|pct} "
+    "of its object pixels to judge (a mask with holes or speckle is all edge).",
+    expected=f"depth > 0 under the mask, but for at most {100 * DEPTH_WHERE_VISIBLE:g}% "
+    f"of object pixels and {100 * DEPTH_OBJECT:g}% of any object's (pixels within "
+    f"{EDGE_BAND} px of a silhouette edge not judged: rasterisers differ there; at "
+    f"least {JUDGED_MIN_PX} px and {100 * JUDGED_MIN_SHARE:g}% of a scene's object pixels "
+    "judged)",
+    needs_schema=True,
+)
+def depth_where_visible(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes = ctx.cases["scenes"]
+    domain = ctx.spec.name
+    # Colour, depth and mask may come from separate raster passes that disagree on a few
+    # edge pixels; what this catches is a mask without depth over (much of) an object.
+    # Pixels within EDGE_BAND of a silhouette edge are not judged (`checks.raster`).
+    worst = 0.0
+    excused = 0
+    fewest = None  # the fewest object pixels judged in a scene
+    for i, sc in enumerate(scenes):
+        v = _base(ctx, i).value
+        mask, depth = np.asarray(v["mask"]), np.asarray(v["depth"])
+        inner = ~raster.edge_band(mask, EDGE_BAND)
+        judged = int(((mask >= 0) & inner).sum())
+        fewest = judged if fewest is None else min(fewest, judged)
+        few = too_few_judged(judged, int((mask >= 0).sum()))
         if few:
-            return Failure(
-                message=f"the renders of {sc['name']} in two record orders leave too few pixels "
-                f"to compare: {few}",
-                expected=f"at least {JUDGED_MIN_PX} px and {100 * JUDGED_MIN_SHARE:g}% of the "
-                f"object pixels farther than {EDGE_BAND} px from a silhouette edge in both",
-                actual={
-                    "judged_px": int((judged & (a >= 0)).sum()),
-                    "object_px": int((a >= 0).sum()),
-                },
-                counterexample=ce,
+            raise Failure(
+                message=f"the render of {sc['name']} leaves too few pixels to judge: {few}",
+                expected=f"at least {JUDGED_MIN_PX} px and {100 * JUDGED_MIN_SHARE:g}% of "
+                f"the object pixels farther than {EDGE_BAND} px from a silhouette edge",
+                actual={"judged_px": judged, "object_px": int((mask >= 0).sum())},
+                counterexample={"scene": scene_spec(domain, sc["records"])},
             )
-        agree = float((expected == b)[judged].mean())
-        if agree < AGREEMENT:
-            return Failure(
-                message="the mask must hold each pixel's index in the records list as given: "
-                f"after reordering the records only {100 * agree:.1f}% of the mask's pixels "
-                f"(farther than {EDGE_BAND} px from a silhouette edge) point at the same objects",
-                expected=f">= {100 * AGREEMENT:.1f}% of pixels agree",
-                actual=f"{100 * agree:.1f}%",
-                counterexample=ce,
+        excused += int(((mask >= 0) & ~(depth > 0) & ~inner).sum())
+        mask = np.where(inner, mask, -2)  # (-2: in the edge band, not judged)
+        missing = (mask >= 0) & ~(depth > 0)
+        shown = int((mask >= 0).sum())
+        share = int(missing.sum()) / max(1, shown)
+        worst = max(worst, share)
+        per_object = [
+            (k, int((missing & (mask == k)).sum()), int((mask == k).sum()))
+            for k in np.unique(mask[mask >= 0])
+        ]
+        bad = [
+            (k, m, n) for k, m, n in per_object if n >= DEPTH_OBJECT_MIN_PX and m > DEPTH_OBJECT * n
+        ]
+        if share > DEPTH_WHERE_VISIBLE or bad:
+            k, m, n = bad[0] if bad else max(per_object, key=lambda t: t[1] / max(t[2], 1))
+            raise Failure(
+                message=f"pixels show an object in the mask but have no depth: "
+                f"{int(missing.sum())} of {shown} ({100 * share:.1f}%), {m} of the {n} of "
+                f"record {int(k)} ('{sc['records'][int(k)]['id']}'), not counting the "
+                f"pixels within {EDGE_BAND} px of a silhouette edge",
+                expected=f"at most {100 * DEPTH_WHERE_VISIBLE:g}% of object pixels, and "
+                f"{100 * DEPTH_OBJECT:g}% of any object's, without depth (pixels within "
+                f"{EDGE_BAND} px of a silhouette edge not judged)",
+                counterexample={"scene": scene_spec(domain, sc["records"])},
             )
+    r.examples = len(scenes)
+    r.metrics = {
+        "masked_without_depth_max": worst,
+        "edge_pixels_without_depth_not_judged": float(excused),
+        "judged_pixels_min": None if fewest is None else float(fewest),
+    }
+
+
+def _order_failure(ctx: SuiteContext, x: tuple) -> Failure | None:
+    """Whether the mask follows the record order for case `x` (a scene, a reorder)."""
+    scenes = ctx.cases["scenes"]
+    domain = ctx.spec.name
+    i, keys = x
+    sc = scenes[i]
+    order = order_from_keys(keys, len(sc["records"]))
+    if order == sorted(order):
         return None
-
-    def order_check(r: CheckResult) -> None:
-        n_keys = max(len(s["records"]) for s in scenes)
-        strategy = st.tuples(st.integers(0, len(scenes) - 1), order_keys(n_keys))
-        reverse = tuple(min(9, k) for k in range(n_keys - 1, -1, -1))
-        outcome = run_property(
-            order_prop,
-            strategy,
-            max_examples=ctx.examples("order"),
-            seed=ctx.seed,
-            examples=[(0, reverse)],
-            shrink_calls=int(ctx.budget.shrink_calls),
+    shuffled = permuted(sc["records"], order)
+    res = render_of(ctx, shuffled, sc["camera"], f"scene {sc['name']} order {order}", derived=True)
+    ce = {
+        "scene": scene_spec(domain, shuffled),
+        "camera": to_jsonable(sc["camera"]),
+        "order": [sc["records"][k]["id"] for k in order],
+    }
+    if not res.ok:
+        return raised("render(records)", res, ce)
+    problem = output_problem(res.value, sc["camera"], len(shuffled))
+    if problem:
+        return Failure(message=problem, counterexample=ce)
+    a, b = np.asarray(_base(ctx, i).value["mask"]), np.asarray(res.value["mask"])
+    # record k of the original list is record order.index(k) of the shuffled one
+    lut = np.full(len(order) + 1, -1)
+    for new, old in enumerate(order):
+        lut[old] = new
+    expected = np.where(a >= 0, lut[np.clip(a, 0, len(order))], -1)
+    judged = ~(raster.edge_band(a, EDGE_BAND) | raster.edge_band(b, EDGE_BAND))
+    few = too_few_judged(int((judged & (a >= 0)).sum()), int((a >= 0).sum()))
+    if few:
+        return Failure(
+            message=f"the renders of {sc['name']} in two record orders leave too few pixels "
+            f"to compare: {few}",
+            expected=f"at least {JUDGED_MIN_PX} px and {100 * JUDGED_MIN_SHARE:g}% of the "
+            f"object pixels farther than {EDGE_BAND} px from a silhouette edge in both",
+            actual={
+                "judged_px": int((judged & (a >= 0)).sum()),
+                "object_px": int((a >= 0).sum()),
+            },
+            counterexample=ce,
         )
-        r.examples = outcome.examples
-        if outcome.failure:
-            raise outcome.failure
+    agree = float((expected == b)[judged].mean())
+    if agree < AGREEMENT:
+        return Failure(
+            message="the mask must hold each pixel's index in the records list as given: "
+            f"after reordering the records only {100 * agree:.1f}% of the mask's pixels "
+            f"(farther than {EDGE_BAND} px from a silhouette edge) point at the same objects",
+            expected=f">= {100 * AGREEMENT:.1f}% of pixels agree",
+            actual=f"{100 * agree:.1f}%",
+            counterexample=ce,
+        )
+    return None
 
-    out.append(
-        run_check("property.mask_follows_record_order", "property", order_check, seed=ctx.seed)
+
+@register(
+    "render",
+    "property.mask_follows_record_order",
+    rule="`mask` holds each pixel's index into `records` as given: the same records in "
+    "another order must give the correspondingly renumbered mask on at least "
+    "{checks.suites.render:AGREEMENT|pct} of the pixels farther than "
+    "{checks.suites.render:EDGE_BAND|px} from a silhouette edge, of which at least "
+    "{checks.suites.render:JUDGED_MIN_PX|px} and {checks.suites.render:JUDGED_MIN_SHARE|pct} "
+    "of the object pixels must show an object.",
+    seeded=True,
+    needs_schema=True,
+)
+def mask_follows_record_order(ctx: SuiteContext, r: CheckResult) -> None:
+    scenes = ctx.cases["scenes"]
+    n_keys = max(len(s["records"]) for s in scenes)
+    strategy = st.tuples(st.integers(0, len(scenes) - 1), order_keys(n_keys))
+    reverse = tuple(min(9, k) for k in range(n_keys - 1, -1, -1))
+    outcome = run_property(
+        partial(_order_failure, ctx),
+        strategy,
+        max_examples=ctx.examples("order"),
+        seed=ctx.seed,
+        examples=[(0, reverse)],
+        shrink_calls=int(ctx.budget.shrink_calls),
     )
-    return out
+    r.examples = outcome.examples
+    if outcome.failure:
+        raise outcome.failure
 
 
+@register(
+    "render",
+    "image.render_vs_simulator",
+    on="host",
+    rule="`render` of the true records is compared, per object, with the simulator's image "
+    "of the same scene (cameras with the domain cameras' width and height divided by "
+    "{checks.inputs:HALF_RES}): silhouette IoU at least {checks.images:IOU_MIN}, mean IoU "
+    "at least {checks.images:IOU_MEAN_MIN}, median depth error at most "
+    "{checks.images:DEPTH_MEDIAN_MAX|mm} where both show the object (on at least "
+    "{checks.images:DEPTH_MIN_PX|px} with depth; pixels within "
+    "{checks.images:DEPTH_EDGE_PX|px} of either outline are left out while that many "
+    "remain), and its silhouette "
+    "within {checks.suites.render:EDGE_BAND|px} of the simulator's along all but "
+    "{checks.suites.render:EDGE_MISMATCH|pct} of its outline (objects the simulator "
+    "shows with fewer than {checks.images:MIN_AREA|px} are not scored; colours need not "
+    "match).",
+)
 def render_vs_simulator(ctx: SuiteContext, out_dir: Any) -> CheckResult:
     """`render(true records)` against the simulator's image of the same scene, per object."""
     t0 = time.perf_counter()
@@ -466,3 +442,6 @@ def render_vs_simulator(ctx: SuiteContext, out_dir: Any) -> CheckResult:
         r.objects = [m.to_dict() for m in matches]
     r.duration_s = time.perf_counter() - t0
     return r
+
+
+RULES: tuple[Rule, ...] = rules("render")

@@ -86,11 +86,11 @@ def inside(path: str, folder: Path) -> bool:
 
 
 def plan_report(tmp_path, start, goal):
-    from checks.suites import plan as plan_suite
+    from checks.registry import run_suite
 
     dom = domains.load("cubes")
     ctx = plan_context(dom, start, goal, to_goal, tmp_path)
-    checks = plan_suite.checks(ctx)
+    checks = run_suite("plan", ctx)
     report = build_report(
         domain="cubes", function="plan", source="", checks=checks, rules=rule_map(dom, "plan")
     )

@@ -223,3 +223,65 @@ def test_interface_process_dies(check):
     )
     assert report["first_failure"] == "interface.runs"
     assert "killed its own process" in by_name(report, "interface.runs")["message"]
+
+
+# -- each check alone, on a draft with the one bug it exists for (`--only`) ------------------
+
+
+def planted(function: str, old: str, new: str) -> str:
+    source = program(function)
+    assert source.count(old) == 1, "the bug must really be planted"
+    return source.replace(old, new)
+
+
+def test_perceive_rotation_that_is_not_a_rotation(check):
+    source = planted(
+        "perceive",
+        "[0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]",
+        "[0.0, 0.0, 1.00002, z], [0.0, 0.0, 0.0, 1.0]",
+    )
+    report = check("perceive", source, few=True, only=["property.proper_rotations"])
+    assert failing(report) == ["property.proper_rotations"]
+    # 2e-5 off: within what the record contract lets through, beyond what the check allows
+    assert "the rotation is not proper" in by_name(report, "property.proper_rotations")["message"]
+    assert by_name(report, "property.accuracy")["status"] == "skipped"
+
+
+def test_relate_edge_type_it_does_not_declare(check):
+    source = planted(
+        "relate",
+        '    "adjacent": "source and target stand side by side with at most 12 mm between their side "\n'
+        '    "faces; listed in both directions",\n',
+        "",
+    )
+    report = check("relate", source, only=["property.relations_declared"])
+    assert failing(report) == ["property.relations_declared"]
+    assert (
+        "['adjacent'] are not declared" in by_name(report, "property.relations_declared")["message"]
+    )
+
+
+def test_render_of_no_records_that_is_not_empty(check):
+    source = planted(
+        "render",
+        "def render(records, meshes, camera):\n",
+        "def render(records, meshes, camera):\n"
+        "    if not records:\n"
+        '        h, w = int(camera["height"]), int(camera["width"])\n'
+        '        return {"rgb": np.zeros((h, w, 3), np.uint8), "depth": np.ones((h, w), np.float32), '
+        '"mask": np.full((h, w), -1, np.int32)}\n',
+    )
+    report = check("render", source, only=["property.empty_scene"])
+    assert failing(report) == ["property.empty_scene"]
+    assert "the mask must be -1" in by_name(report, "property.empty_scene")["message"]
+
+
+def test_plan_longer_than_its_bound(check):
+    source = planted(
+        "plan",
+        '            return {"status": "ok", "steps": steps}',
+        '            return {"status": "ok", "steps": steps + steps[-1:] * (3 * len(goal) + 1)}',
+    )
+    report = check("plan", source, only=["property.plan_length_bounded"])
+    assert failing(report) == ["property.plan_length_bounded"]
+    assert "at most" in by_name(report, "property.plan_length_bounded")["message"]
