@@ -5,7 +5,11 @@
 Draws the `perceive` check's observations from each case seed (`checks.inputs.build_cases`, the
 default budget: 45 a seed), calls the program on each in a local sandbox session, exactly as
 the check calls it, and scores it as `property.accuracy` does (`sim.score.state_accuracy`).
-Prints every wrong observation (case, camera, the objects off and by how much) and the rate.
+Prints every wrong observation (case, camera, the objects off and by how much) and the rate,
+and how many readings could not stand as perceived (`geometry.scene_problems` at the trials'
+tolerances: parts interpenetrating by more than `TOLERANCES.penetration`, unsupported or
+tipping) — a reading can be accurate and still put parts inside each other, which the executor
+then meets at the grasp.
 A program that is wrong on a fraction p of observations passes a check of n with probability
 (1 - p)^n: at 45 observations, p = 1 % passes 64 % of draws, p = 0.1 % passes 96 %.
 
@@ -47,6 +51,7 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
     from checks.context import DomainSpec
     from checks.inputs import build_cases
     from checks.suites.perceive import reading_score
+    from geometry import scene_problems
     from sandbox import MESHES, Program
     from sandbox.local_backend import LocalExecutor
 
@@ -56,7 +61,7 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
     program = Program(
         modules=session_modules("perceive", sources["perceive"], others), meshes=spec.meshes
     )
-    rows, total = [], 0
+    rows, total, invalid = [], 0, []
     with LocalExecutor(quiet=True) as ex, ex.open_session(program, load_timeout_s=120) as s:
         if not s.load.ok:
             raise SystemExit(f"the programs do not load: {s.load}")
@@ -76,6 +81,10 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
                     rows.append({**row, "error": f"{got.verdict}: {got.detail}"[:300]})
                     wrong += 1
                     continue
+                known = [o for o in got.value if o.get("mesh") in spec.geometry]
+                problems = scene_problems(known, spec.geometry)
+                if problems:
+                    invalid.append({**row, "problems": problems[:3]})
                 score, untold = reading_score(dom, spec.meshes, case, got.value)
                 if untold:  # not scored, as in property.accuracy: the image cannot tell them
                     row["untold"] = sorted(untold)
@@ -91,7 +100,7 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
                 f"seed {seed}: {wrong} of {len(cases)} wrong "
                 f"({built:.0f} s to draw, {time.perf_counter() - t0 - built:.0f} s to perceive)"
             )
-    return rows, total
+    return rows, total, invalid
 
 
 def program_sources(domain: str, folder: Path | None = None) -> dict[str, str]:
@@ -112,16 +121,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", type=Path, help="write the wrong observations here")
     args = p.parse_args(argv)
     sources = program_sources(args.domain, args.programs)
-    rows, total = wrong_observations(
+    rows, total, invalid = wrong_observations(
         args.domain, sources, args.seeds, lambda line: print(line, file=sys.stderr, flush=True)
     )
     for r in rows:
         print(json.dumps(r))
+    for r in invalid:
+        print(json.dumps({"could_not_stand": r}))
     print(
-        f"{args.domain}: {len(rows)} of {total} drawn observations wrong ({100 * len(rows) / max(total, 1):.1f} %)"
+        f"{args.domain}: {len(rows)} of {total} drawn observations wrong ({100 * len(rows) / max(total, 1):.1f} %); "
+        f"{len(invalid)} readings could not stand as perceived"
     )
     if args.json:
-        args.json.write_text(json.dumps({"total": total, "wrong": rows}, indent=1) + "\n")
+        out = {"total": total, "wrong": rows, "could_not_stand": invalid}
+        args.json.write_text(json.dumps(out, indent=1) + "\n")
     return 0
 
 
