@@ -169,9 +169,9 @@ class Arm:
         model: (menagerie folder, model file stem) the simulator loads.
         joints: the arm's joint names in that model, base to flange; the actuators are named
             after them.
+        joint_ranges: per joint, (lowest, highest) [rad]; the last is the wrist (the flange
+            about the tool axis), which a held object turns with (`wrist_range`).
         velocity_limits: per joint [rad/s].
-        wrist_range: the last joint's range (the flange about the tool axis) [rad]: a held
-            object turns with it.
         park: joint angles for observations [rad]: out of the cameras' sight.
         ready: joint angles above the workspace, the IK's posture target [rad].
         workspace: where it reaches top-down with the gripper; every point of an object it
@@ -187,8 +187,8 @@ class Arm:
     full_name: str
     model: tuple[str, str]
     joints: tuple[str, ...]
+    joint_ranges: tuple[tuple[float, float], ...]
     velocity_limits: tuple[float, ...]
-    wrist_range: tuple[float, float]
     park: tuple[float, ...]
     ready: tuple[float, ...]
     workspace: Workspace
@@ -197,9 +197,14 @@ class Arm:
 
     def __post_init__(self) -> None:
         n = len(self.joints)
-        for name in ("velocity_limits", "park", "ready"):
+        for name in ("joint_ranges", "velocity_limits", "park", "ready"):
             if len(getattr(self, name)) != n:
                 raise ValueError(f"Arm.{name} has {len(getattr(self, name))} values for {n} joints")
+
+    @property
+    def wrist_range(self) -> tuple[float, float]:
+        """The last joint's range [rad]: a held object turns with it."""
+        return self.joint_ranges[-1]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -230,11 +235,25 @@ class Gripper:
 
 
 @dataclass(frozen=True, kw_only=True)
+class WristCamera:
+    """The camera on the wrist that estimates the held object's pose after a grasp.
+
+    Attributes:
+        position_noise: the estimate's error, Gaussian, per reading [m].
+        rotation_noise: likewise about a random axis [rad].
+    """
+
+    position_noise: float
+    rotation_noise: float
+
+
+@dataclass(frozen=True, kw_only=True)
 class Robot:
-    """An arm with a gripper: what RIVET drives (`ROBOT`)."""
+    """An arm with a gripper and a wrist camera: what RIVET drives (`ROBOT`)."""
 
     arm: Arm
     gripper: Gripper
+    wrist_camera: WristCamera
 
     @property
     def name(self) -> str:
@@ -246,7 +265,8 @@ class Robot:
         gripper = {f.name: getattr(self.gripper, f.name) for f in fields(self.gripper)}
         gripper["stroke"] = self.gripper.stroke.to_json()
         gripper["fingers"] = asdict(self.gripper.fingers)
-        return json.loads(json.dumps({"arm": arm, "gripper": gripper}))
+        camera = asdict(self.wrist_camera)
+        return json.loads(json.dumps({"arm": arm, "gripper": gripper, "wrist_camera": camera}))
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Robot:
@@ -258,12 +278,13 @@ class Robot:
             a[key] = Workspace(x=_pair(w["x"]), y=_pair(w["y"]), reach=float(w["reach"]))
         for key in ("model", "joints", "velocity_limits", "park", "ready"):
             a[key] = tuple(a[key])
-        for key in ("wrist_range", "placement_spread"):
-            a[key] = _pair(a[key])
+        a["joint_ranges"] = tuple(_pair(r) for r in a["joint_ranges"])
+        a["placement_spread"] = _pair(a["placement_spread"])
         g["model"], g["control"] = tuple(g["model"]), _pair(g["control"])
         g["stroke"] = GripperStroke.from_json(g["stroke"])
         g["fingers"] = FingerModel(**{k: _tuples(v) for k, v in g["fingers"].items()})
-        return cls(arm=Arm(**a), gripper=Gripper(**g))
+        camera = WristCamera(**{k: float(v) for k, v in data["wrist_camera"].items()})
+        return cls(arm=Arm(**a), gripper=Gripper(**g), wrist_camera=camera)
 
     def replaced(self, **changes: Any) -> Robot:
         """A copy with `arm=` / `gripper=` replaced (e.g. `dataclasses.replace` of either)."""
@@ -285,8 +306,16 @@ DEFAULT = Robot(
         full_name="Franka FR3",
         model=("franka_fr3", "fr3"),
         joints=tuple(f"fr3_joint{i}" for i in range(1, 8)),
+        joint_ranges=(
+            (-2.7437, 2.7437),
+            (-1.7837, 1.7837),
+            (-2.9007, 2.9007),
+            (-3.0421, -0.1518),
+            (-2.8065, 2.8065),
+            (0.5445, 4.5169),
+            (-3.0159, 3.0159),
+        ),
         velocity_limits=(2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26),
-        wrist_range=(-3.0159, 3.0159),
         # upright and leaning back, wrist folded behind the base: cameras in front of the table
         # (x ≈ 1.0–1.3 m, elevated) do not see the arm over the workspace
         park=(0.0, -0.6, 0.0, -0.5, 0.0, 3.9, 0.785),
@@ -346,6 +375,9 @@ DEFAULT = Robot(
             inner_half_width=0.025,
         ),
     ),
+    # looking at the held object from ~10 cm (the paper's ZED M: at that range a fitted pose
+    # is good to a few tenths of a millimetre and degree)
+    wrist_camera=WristCamera(position_noise=0.0003, rotation_noise=float(np.radians(0.3))),
 )  # fmt: skip
 """The Franka FR3 with the Robotiq 2F-85."""
 
@@ -390,5 +422,6 @@ __all__ = [
     "Gripper",
     "GripperStroke",
     "Robot",
+    "WristCamera",
     "load",
 ]

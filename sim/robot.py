@@ -227,6 +227,8 @@ def _arm_with_gripper(*, visuals: Visuals = True) -> mujoco.MjSpec:
     arm.option.impratio = 10.0
     for key in list(arm.keys):
         arm.delete(key)  # the arm's "home" key knows no gripper joints; we add our own
+    for name, (lo, hi) in zip(ROBOT.arm.joints, ROBOT.arm.joint_ranges, strict=True):
+        arm.joint(name).range = [lo, hi]  # the description's limits (the IK keeps to them)
     n_gripper_q = sum(_QPOS_SIZE[j.type] for j in gripper.joints)
     arm.attach(gripper, prefix="gripper/", site=arm.site("attachment_site"))
     arm.body("gripper/base").add_site(

@@ -29,6 +29,7 @@ import mujoco
 import numpy as np
 
 from contracts import se3
+from geometry.robot import ROBOT
 from sim import robot
 
 OBJECT_BODY_NAMES = ("{id}", "object/{id}")
@@ -87,17 +88,19 @@ class GripperSensor:
 class InHandNoise:
     """The in-hand pose estimate's error: Gaussian, per reading [m], [rad]."""
 
-    position: float = 0.0003
-    rotation: float = float(np.radians(0.3))
+    position: float
+    rotation: float
 
     @property
     def exact(self) -> bool:
         return self.position == 0 and self.rotation == 0
 
 
-WRIST_CAMERA = InHandNoise()
-"""A wrist camera looking at the object in the hand from ~10 cm (the paper's ZED M: at that
-range a fitted pose is good to a few tenths of a millimetre and degree)."""
+WRIST_CAMERA = InHandNoise(
+    position=ROBOT.wrist_camera.position_noise, rotation=ROBOT.wrist_camera.rotation_noise
+)
+"""The robot's wrist camera (`geometry.robot.ROBOT.wrist_camera`): its fitted pose of the
+object in the hand, good to a few tenths of a millimetre and degree."""
 EXACT = InHandNoise(position=0.0, rotation=0.0)
 """The oracle-sensing protocol's in-hand reading: the true relative pose."""
 

@@ -2,9 +2,10 @@
 `geometry.robot` (`ROBOT`, or the JSON file `RIVET_ROBOT` names).
 
 The seam test describes another hand — fingertips reaching 30 mm out from the pads instead of
-17 mm, the tool centre 10 mm farther out, a narrower wrist range, other names — and sees the
-change in the simulator's robot, the IK, the hand model, the toolbox's facts and documentation,
-a check's rule, a prompt and the frozen sets' toolbox hash."""
+17 mm, the tool centre 10 mm farther out, a narrower wrist range, a noisier wrist camera, other
+names — and sees the change in the simulator's robot, the IK, the hand model, the executor's
+in-hand estimate, the toolbox's facts and documentation, a check's rule, a prompt and the frozen
+sets' toolbox hash."""
 
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from contracts.functions import CODE_DEPS
 from geometry.robot import ROBOT
 from sim import robot as sim_robot
 from sim.ik import ArmIK
+from sim.sensing import WRIST_CAMERA
 import toolbox.robot as tr
 from toolbox.docs import toolbox_docs
 
@@ -69,6 +71,8 @@ print(json.dumps({
     "first_pickable_gap": next(g for g in (0.02, 0.025, 0.03, 0.035, 0.04, 0.045, 0.05) if pickable(g)),
     "finger_depth": tr.FINGER_DEPTH,
     "wrist_range": list(tr.WRIST_RANGE),
+    "ik_wrist_range": model.jnt_range[model.joint(sim_robot.ARM_JOINTS[-1]).id].tolist(),
+    "in_hand_noise": WRIST_CAMERA.position,
     "docs_state_depth": f"FINGER_DEPTH = {tr.FINGER_DEPTH}" in toolbox_docs(),
     "rule": rule,
     "prompt_names_robot": f"a {ROBOT.arm.full_name} arm with a {ROBOT.gripper.full_name}" in prompt,
@@ -96,7 +100,8 @@ def _longer_fingers() -> dict:
     data["gripper"]["tcp_offset"] += 0.010
     data["gripper"]["name"] = "2F-85L"
     data["arm"]["full_name"] = "Franka FR3 (seam test)"
-    data["arm"]["wrist_range"] = [-2.5, 2.5]
+    data["arm"]["joint_ranges"][-1] = [-2.5, 2.5]
+    data["wrist_camera"]["position_noise"] = 0.001
     return data
 
 
@@ -112,7 +117,10 @@ def test_every_consumer_follows_a_modified_description(tmp_path):
     assert before["first_pickable_gap"] < after["first_pickable_gap"]
     # the toolbox's facts and the documentation the prompts show of them
     assert (before["finger_depth"], after["finger_depth"]) == (0.017, 0.030)
-    assert after["wrist_range"] == [-2.5, 2.5]
+    assert after["wrist_range"] == after["ik_wrist_range"] == [-2.5, 2.5]
+    assert before["ik_wrist_range"] == pytest.approx(list(DEFAULT.arm.wrist_range))
+    # the executor's wrist camera
+    assert (before["in_hand_noise"], after["in_hand_noise"]) == (0.0003, 0.001)
     assert before["docs_state_depth"] and after["docs_state_depth"]
     # a check's rule, the prompt, and what frozen sets were checked against
     assert "top-down 2F-85 grasp" in before["rule"]

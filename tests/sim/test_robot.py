@@ -124,6 +124,17 @@ def test_the_hand_model_stroke_is_the_menagerie_grippers():
     np.testing.assert_allclose(STROKE.tip, measured.tip, atol=5e-5)
 
 
+def test_the_description_states_the_joint_ranges_of_the_menagerie_model():
+    """The description's joint ranges (what the simulator and the IK keep to) are the
+    menagerie FR3's own, so describing them changed nothing."""
+    from geometry.robot import ROBOT
+
+    spec = robot._load_spec(*ROBOT.arm.model)
+    menagerie = {j.name: list(j.range) for j in spec.joints}
+    for name, rng in zip(ROBOT.arm.joints, ROBOT.arm.joint_ranges, strict=True):
+        np.testing.assert_allclose(rng, menagerie[name], atol=1e-9)
+
+
 def test_the_toolbox_states_the_wrist_range_of_the_model():
     """toolbox.robot.WRIST_RANGE (what the prompts give a program) is the menagerie FR3's last
     joint, the one the executor and the checks' inverse kinematics turn the held object with."""
