@@ -1,12 +1,14 @@
 """The robot description: the arm, the gripper and the numbers every part is built from.
 
 Design rule: one record, `ROBOT`, says which robot RIVET drives — the arm's joints, limits and
-postures, where it reaches, the gripper's stroke, fingers and tool frame. The simulator builds
-its robot from it (`sim.robot`: which menagerie models, joint names, the TCP site, the park
-posture), the IK takes its joints, limits and posture from it (`sim.ik`), the hand model its
+postures, where it reaches, the gripper's stroke, fingers and tool frame, the wrist camera's
+accuracy. The simulator builds its robot from it (`sim.robot`: which menagerie models, joint
+names and ranges, the TCP site, the park posture), the IK takes its joints, limits and posture
+from it (`sim.ik`), the executor its in-hand estimate (`sim.sensing`), the hand model its
 gripper (`geometry.grasps`, `geometry.clearance`, `geometry.moves`), and the toolbox the facts
 it shows programs (`toolbox.robot`), which the check rules and the prompts quote. No other
-module spells a number of the robot.
+module spells a number of the robot; the names of the menagerie models' own elements (pads,
+drivers, the flange site) stay in `sim.robot`, which reads them.
 
 The default is a Franka Research 3 arm with a Robotiq 2F-85 gripper, from MuJoCo Menagerie.
 The gripper's numbers were measured from the menagerie model (`sim.robot.measure_stroke` for the
