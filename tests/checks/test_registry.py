@@ -3,6 +3,7 @@ list of them in order, and every check with a test of its own."""
 
 from __future__ import annotations
 
+import functools
 import re
 from pathlib import Path
 
@@ -98,7 +99,9 @@ def test_every_function_has_its_suite_from_the_registry():
         assert len({c.name for c in checks}) == len(checks)
 
 
+@functools.cache
 def _tests_text() -> str:
+    """Every other test file's text, read once for all the checks."""
     mine = Path(__file__).resolve()
     return "\n".join(
         p.read_text() for p in (REPO / "tests").rglob("test_*.py") if p.resolve() != mine
@@ -111,7 +114,8 @@ def _tests_text() -> str:
     ids=lambda c: f"{c.function}:{c.name}",
 )
 def test_every_check_has_a_test_of_its_own(check):
-    """A test elsewhere names the check in a test about its function: it makes the check fail
-    on a draft with the bug the check exists for, or pass on the reference."""
+    """Some other test names the check. A proxy only: it does not see whether that test makes
+    the check fail on a draft with its bug (the tests in `test_suites.py` do, for the checks
+    nothing else named)."""
     text = _tests_text()
     assert re.search(re.escape(f'"{check.name}"'), text), f"no test names {check.name}"
