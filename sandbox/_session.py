@@ -185,12 +185,12 @@ class HarnessExecutor(Executor):
 
     def _discard(self) -> None:
         """Kill the harness and forget it; the next session starts a fresh one."""
-        if self._channel is not None:
-            try:
+        try:
+            if self._channel is not None:
                 self._channel.close()
-            finally:
-                self._channel = None
-                self._kill()
+        finally:
+            self._channel = None
+            self._kill()  # also a harness whose start was interrupted before its channel
 
     # ------------------------------------------------------------------------ sessions
 

@@ -27,6 +27,7 @@ import os
 import select
 import socket
 import struct
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -164,6 +165,9 @@ class DockerExecutor(HarnessExecutor):
         }
         self.preload = preload
         self.container: Any = None
+        # labels every container this executor creates, so that one whose creation a signal
+        # interrupted (the engine made it, its id never came back) is still removed
+        self.token = uuid.uuid4().hex
         self.reaped = reap_leftovers(self.client)
 
     def container_options(self) -> dict[str, Any]:
@@ -196,7 +200,7 @@ class DockerExecutor(HarnessExecutor):
                 Ulimit(name="nofile", soft=1024, hard=1024),
             ],
             "log_config": LogConfig(type="none"),
-            "labels": {LABEL: "1", f"{LABEL}.owner": _owner()},
+            "labels": {LABEL: "1", f"{LABEL}.owner": _owner(), f"{LABEL}.executor": self.token},
         }
 
     def _open(self) -> Channel:
@@ -252,12 +256,18 @@ class DockerExecutor(HarnessExecutor):
             self.client.close()
 
     def _kill(self) -> None:
+        """Remove this executor's container, and any other it created: a SIGTERM or Ctrl-C
+        can land between the engine creating one and its id reaching `self.container`."""
         import docker
 
-        if self.container is not None:
-            with contextlib.suppress(docker.errors.DockerException):
+        with contextlib.suppress(docker.errors.DockerException):
+            if self.container is not None:
                 self.container.remove(force=True)
-            self.container = None
+            for c in self.client.containers.list(
+                all=True, filters={"label": f"{LABEL}.executor={self.token}"}
+            ):
+                c.remove(force=True)
+        self.container = None
 
     def _death(self) -> tuple[str, str]:
         import docker

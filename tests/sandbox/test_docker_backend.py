@@ -157,6 +157,24 @@ def test_leftover_containers_are_reaped(sandbox_image, docker_executor):
             leftover.remove(force=True)
 
 
+def test_a_container_whose_start_was_interrupted_is_removed_on_close(sandbox_image):
+    """SIGTERM or Ctrl-C can land after the engine made the container and before its id
+    reached the executor (`rivet eval` stopped as a pool starts): closing removes it all the
+    same, found by the executor's own label."""
+    ex = DockerExecutor(image=sandbox_image, memory_mb=2048)
+    made = ex._create()  # what `_open` does first; the executor never learns of it
+    mine = {"label": f"{LABEL}.executor={ex.token}"}
+    assert [c.id for c in ex.client.containers.list(all=True, filters=mine)] == [made.id]
+    ex.close()
+    from sandbox.image import docker_client
+
+    client = docker_client()
+    try:
+        assert client.containers.list(all=True, filters=mine) == []
+    finally:
+        client.close()
+
+
 def test_jobs_larger_than_the_container_are_refused(docker_executor):
     with pytest.raises(BadJob, match="memory_mb=3072"):
         docker_executor.run(Job(source="def f():\n    pass\n", function="f", memory_mb=2048))
