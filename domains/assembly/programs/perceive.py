@@ -31,6 +31,9 @@
    of its points (the ICP's pose can sit a part-length off, turned). A sliver (a few pixels)
    keeps its heading unless the refiner turns it far: it shows where the part is and which
    faces show, but a small turn moves its pixels no more than the calibration error does.
+6. Centred loads: a beam or the arch rests centred on its two pillars. A pillar that shows
+   only a sliver behind the other is tried at the mirror of the seen one through the load's
+   centre, and moved there where that explains its sliver as well.
 """
 
 import hashlib
@@ -97,6 +100,8 @@ SMALL_TURN = np.radians(60)  # a turn a sliver cannot show
 RESEARCH_SHIFT = 0.06  # [m] how far a part searched again may move from its points' centre
 BEHIND = (0.05, 0.08, 0.11, 0.15)  # [m] from a seen part, away from the camera: hiding spots
 SIGHT_SCALE = 4  # the hiding spot is tested on the image reduced this many times
+MIRROR_SLACK = 0.02  # refiner cost a mirrored supporter may add to its sliver's fit
+MIRROR_MIN = 0.003  # [m] a mirrored position nearer than this changes nothing
 BOX_MARGIN = 4  # [px] around a part's pixels: its morphology sees nothing beyond
 
 _CACHE = {}
@@ -770,6 +775,61 @@ def _refined(observation, meshes, camera, poses, parts, labels):
     return out
 
 
+def _mirrored(observation, meshes, camera, poses, shapes, parts, labels):
+    """A part carried on two supporters (a beam or the arch on two pillars) rests centred on
+    them. Where one supporter shows only a sliver (fewer than WEAK_PIXELS) and the other is
+    well seen, the sliver's fit can slide along the view ray or along the load; the weak
+    supporter is tried at the mirror of the other through the load's centre of mass, refined
+    there by at most MIRROR_MIN, and moved there when that explains its segment as well
+    (the refiner's cost, within MIRROR_SLACK) and touches nothing."""
+    sup = supports(_records(poses), shapes, contact_tol=0.003)
+    pixels = {i: p.pixels for i, p in parts.items()}
+    out = dict(poses)
+    for load in sorted(poses):
+        under = sorted(j for j in sup.get(load, []) if j != "table")
+        if len(under) != 2 or any(j not in parts for j in under):
+            continue
+        weak, strong = sorted(under, key=lambda j: (pixels[j], j))
+        if pixels[weak] >= WEAK_PIXELS or pixels[strong] < 2 * pixels[weak]:
+            continue
+        if abs(_lowest(shapes[weak], out[weak]) - _lowest(shapes[strong], out[strong])) > 0.003:
+            continue
+        T = out[load]
+        com = T[:3, :3] @ shapes[load].centre_of_mass + T[:3, 3]
+        M = out[weak].copy()
+        M[:2, 3] = 2 * com[:2] - out[strong][:2, 3]
+        if np.linalg.norm(M[:2, 3] - out[weak][:2, 3]) < MIRROR_MIN:
+            continue
+        ids = [i for i in PARTS if i in out]
+        segment = {weak: labels == list(PARTS).index(weak)}
+        fits = [
+            refine_poses(
+                observation,
+                meshes,
+                [
+                    {"id": i, "mesh": PARTS[i][0], "pose": pose if i == weak else out[i]}
+                    for i in ids
+                ],
+                camera=camera,
+                segments=segment,
+                hypotheses="given",
+                **kw,
+            )[ids.index(weak)]
+            for pose, kw in (
+                (out[weak], {"iterations": 1, "max_shift": 1e-4}),
+                (M, {"max_shift": MIRROR_MIN}),
+            )
+        ]
+        if fits[1].cost > fits[0].cost + MIRROR_SLACK:
+            continue
+        M[:3, :3], M[:2, 3] = fits[1].pose[:3, :3], fits[1].pose[:2, 3]
+        trial = {**out, weak: M}
+        hits = collisions(_records(trial), shapes, tolerance=CONFLICT_DEPTH)
+        if not any(weak in (a, b) and b != "table" for a, b, _ in hits):
+            out = trial
+    return out
+
+
 def _kept_heading(fit, T):
     """The refined pose; for a sliver (fewer than FEW_PIXELS) turned by less than
     SMALL_TURN, with the heading of `T`: a few pixels show where a part is, and which of its
@@ -827,6 +887,7 @@ def perceive(observation, meshes, camera):
     poses = _push_apart(
         _settle(poses, shapes, order), shapes, {i: p.pixels for i, p in parts.items()}
     )
+    poses = _mirrored(observation, meshes, camera, poses, shapes, parts, labels)
     if missing:
         pixels = {i: p.pixels for i, p in parts.items()}
         poses = _hidden_supporters(poses, shapes, models, missing, pixels)
