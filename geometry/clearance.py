@@ -133,8 +133,8 @@ def gripper_hits(
     triangle_sets: Sequence[Triangles],
     fingers: FingerModel,
 ) -> bool:
-    boxes = _gripper_boxes(T_world_tcp, gap, tip, margin, fingers)
-    return any(_boxes_hit(boxes, t) for t in triangle_sets)
+    """Whether the gripper's boxes hit any of `triangle_sets` (`first_hit` says which)."""
+    return first_hit(T_world_tcp, gap, tip, margin, triangle_sets, fingers) >= 0
 
 
 def first_hit(

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -287,10 +287,6 @@ class Robot:
         g["fingers"] = FingerModel(**{k: _tuples(v) for k, v in g["fingers"].items()})
         camera = WristCamera(**{k: float(v) for k, v in data["wrist_camera"].items()})
         return cls(arm=Arm(**a), gripper=Gripper(**g), wrist_camera=camera)
-
-    def replaced(self, **changes: Any) -> Robot:
-        """A copy with `arm=` / `gripper=` replaced (e.g. `dataclasses.replace` of either)."""
-        return replace(self, **changes)
 
 
 def _pair(v: Any) -> tuple[float, float]:
