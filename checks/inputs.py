@@ -110,23 +110,30 @@ def _executable(domain_name: str, inst: domains.Instance) -> bool:
 
 
 @lru_cache(maxsize=256)
-def _composed(domain_name: str, seed: int) -> domains.Instance | None:
-    return domains.load(domain_name).composed_instance(seed)
+def _composed(domain_name: str, seed: int, ordered: bool = True) -> domains.Instance | None:
+    return domains.load(domain_name).composed_instance(seed, ordered=ordered)
 
 
 def composed(
-    domain: Domain, rng: np.random.Generator, n: int, *, executable: bool = False
+    domain: Domain,
+    rng: np.random.Generator,
+    n: int,
+    *,
+    executable: bool = False,
+    scenes_only: bool = False,
 ) -> list[domains.Instance]:
     """`n` composed instances (goals built from the task's parts, `Domain.composed_instance`)
     with an order the hand can execute (and the arm too, when `executable`), at seeds drawn
-    from `rng` (none when the domain has no composer)."""
+    from `rng` (none when the domain has no composer); `scenes_only`: their two scenes, with
+    no order."""
     out: list[domains.Instance] = []
     if domain.composed_goals is None:
         return out
     for _ in range(20 * max(n, 1)):
         if len(out) >= n:
             break
-        inst = _composed(domain.name, int(rng.integers(FRESH_FROM, SEED_SPACE)))
+        seed = int(rng.integers(FRESH_FROM, SEED_SPACE))
+        inst = _composed(domain.name, seed, ordered=not scenes_only)
         if inst is not None and (not executable or _executable(domain.name, inst)):
             out.append(inst)
     return out
@@ -369,8 +376,13 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
         cases["observations"] = perceive_cases(domain, budget, seed)
         return cases
     # plan's cases are ones the robot its checks hold a plan to can carry out; where every draw
-    # already was, a case seed names the same cases as before
-    pool = instances(domain, rng, budget.instances, executable=function == "plan")
+    # already was, a case seed names the same cases as before. `relate` and `render` are shown
+    # scenes, so theirs are drawn with no construction order (searching one is most of a
+    # draw's time) and a start no order reaches is one of their cases too.
+    scenes_only = function != "plan"
+    pool = instances(
+        domain, rng, budget.instances, executable=not scenes_only, scenes_only=scenes_only
+    )
     sides = ("start", "goal")
 
     def named(k: int, inst: domains.Instance) -> str:
@@ -381,7 +393,7 @@ def build_cases(domain: Domain, function: str, budget: Budget, seed: int) -> dic
         scenes = [(named(k, inst), inst) for k, inst in enumerate(pool)]
         scenes += [
             (named(len(pool) + k, inst), inst)
-            for k, inst in enumerate(composed(domain, rng, budget.composed))
+            for k, inst in enumerate(composed(domain, rng, budget.composed, scenes_only=True))
         ]
         cases["scenes"] = [
             {

@@ -323,17 +323,20 @@ class Domain:
         entirely; `benchmarks.occlusion_bench` scores them all)."""
         return None
 
-    def composed_instance(self, seed: int) -> Instance | None:
+    def composed_instance(self, seed: int, *, ordered: bool = True) -> Instance | None:
         """`compose(seed)` with a construction order the robot can execute
-        (`robot_reference_planner`), named ``composed/seedS``; None when there is none."""
+        (`robot_reference_planner`), named ``composed/seedS``; None when there is none.
+        `ordered=False`: the two scenes only (``order`` empty), as `generate` gives them."""
         drawn = self.compose(seed)
         if drawn is None:
             return None
         start, goal = drawn
-        try:
-            order = self.robot_reference_planner.order(start, goal)
-        except GenerationError:
-            return None
+        order: Sequence[dict] = ()
+        if ordered:
+            try:
+                order = self.robot_reference_planner.order(start, goal)
+            except GenerationError:
+                return None
         return Instance(
             domain=self.name,
             name=f"composed/seed{seed}",

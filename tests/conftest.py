@@ -76,3 +76,27 @@ def _drawn_cases_kept():
     checks.run.build_cases = build_cases
     yield
     checks.run.build_cases = drawn
+
+
+# The tests that each take minutes (the three authoring replays): `--dist loadfile` would keep
+# them in one unit, which `pytest-xdist` sends out last (it starts the files with the most
+# tests first), and one core would replay alone at the end. Each is a unit of its own, sent
+# first.
+LONGEST = ("tests/agent/test_author_replay.py::test_replayed_authoring_",)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class LongestFirst(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return nodeid if nodeid.startswith(LONGEST) else super()._split_scope(nodeid)
+
+        def _assign_work_unit(self, node) -> None:
+            for scope in [s for s in reversed(self.workqueue) if s.startswith(LONGEST)]:
+                self.workqueue.move_to_end(scope, last=False)
+            super()._assign_work_unit(node)
+
+    return LongestFirst(config, log)

@@ -319,12 +319,20 @@ def _occurrences(T: np.ndarray, blob: bytes, text: str) -> list[str]:
     return found
 
 
+SEARCHED = 8  # observations the searcher is called on (a call after the first takes ~1 s)
+
+
 def test_a_perceive_session_can_reach_no_ground_truth(docker):
     """A `perceive` that searches its whole file system, environment, /proc and its own
-    memory, called with exactly the perceive checks' inputs in a session set up as
-    `checks.run` sets it up, right after a session of the same warm container received the
-    true records of every one of those scenes (as a `relate` check does), finds none of them —
-    and does find a control pose planted where it can be reached."""
+    memory, called with the perceive checks' inputs in a session set up as `checks.run` sets
+    it up, right after a session of the same warm container received the true records of
+    every one of those scenes (as a `relate` check does), finds none of them — and does find
+    a control pose planted where it can be reached.
+
+    The searcher is called on the first `SEARCHED` observations (the hiding cases, then
+    generated and composed scenes from drawn and named cameras): its first call searches
+    everything, later calls only what changes from call to call (its memory and arguments),
+    by the same code path for every observation."""
     import checks.run
     import domains
     from checks.budget import DEFAULT
@@ -363,7 +371,7 @@ def test_a_perceive_session_can_reach_no_ground_truth(docker):
     dumps = []
     with docker.open_session(searcher, memory_mb=4096, load_timeout_s=60) as session:
         assert session.load.ok, session.load
-        for case in observations:
+        for case in observations[:SEARCHED]:
             got = session.call(
                 "perceive",
                 "perceive",
