@@ -479,14 +479,7 @@ def aligned(ctx: SuiteContext, renders: Mapping[str, Any]) -> dict[str, Any]:
             continue  # `image.perceive_rerender` says so
         lut = np.array([index.get(str(i), -2) for i in got["ids"]] + [-1], dtype=np.int64)
         same = lut[np.where(mask >= 0, mask, len(got["ids"]))]  # candidate in reference ids
-        k = calibration_pixels(case)
-        best, shift = -1, (0, 0)
-        for dy in range(-k, k + 1):
-            for dx in range(-k, k + 1):
-                moved = _shift(same, dy, dx, -1)
-                score = int(((moved == ref) & (ref >= 0)).sum())
-                if score > best or (score == best and abs(dy) + abs(dx) < sum(map(abs, shift))):
-                    best, shift = score, (dy, dx)
+        shift = best_shift(same, ref, calibration_pixels(case))
         if shift != (0, 0):
             out[case["name"]] = dict(
                 got,
@@ -495,6 +488,25 @@ def aligned(ctx: SuiteContext, renders: Mapping[str, Any]) -> dict[str, Any]:
                 shift_px=shift,
             )
     return out
+
+
+def best_shift(same: np.ndarray, ref: np.ndarray, k: int) -> tuple[int, int]:
+    """The image translation (dy, dx), each within ±`k`, under which the most pixels of the
+    observed objects (`ref >= 0`) show the same object in `same` moved by it
+    (`_shift(same, dy, dx, -1) == ref`); of equal scores the smallest shift (|dy| + |dx|),
+    then the first in row order. Scored on the object pixels only."""
+    ys, xs = np.nonzero(ref >= 0)
+    want = ref[ys, xs]
+    h, w = same.shape
+    best, shift = -1, (0, 0)
+    for dy in range(-k, k + 1):
+        for dx in range(-k, k + 1):
+            sy, sx = ys - dy, xs - dx
+            inside = (sy >= 0) & (sy < h) & (sx >= 0) & (sx < w)
+            score = int((same[sy[inside], sx[inside]] == want[inside]).sum())
+            if score > best or (score == best and abs(dy) + abs(dx) < sum(map(abs, shift))):
+                best, shift = score, (dy, dx)
+    return shift
 
 
 def _shift(a: np.ndarray, dy: int, dx: int, fill: Any) -> np.ndarray:
