@@ -190,11 +190,11 @@ def test_plan_cases_are_instances_the_checked_robot_can_carry_out():
 
 
 @pytest.mark.parametrize("name", domains.names())
-def test_perceive_scenes_are_drawn_without_searching_an_order(name, monkeypatch):
-    """`perceive` is shown scenes: its generated cases are the generator's starts and goals,
-    drawn with no construction order searched (the planners fail here if asked), valid scenes
-    all, and the same scenes an ordered draw gives wherever that draw's first start has an
-    order."""
+def test_scene_cases_are_drawn_without_searching_an_order(name, monkeypatch):
+    """`perceive`, `relate` and `render` are shown scenes: their generated cases are the
+    generator's starts and goals (and `relate`'s composed ones the composer's), drawn with no
+    construction order searched (the planners fail here if asked), valid scenes all, and the
+    same scenes an ordered draw gives wherever that draw's first start has an order."""
     from checks.inputs import _instance
     from domains.generation import geometric_problems
 
@@ -203,7 +203,7 @@ def test_perceive_scenes_are_drawn_without_searching_an_order(name, monkeypatch)
     _instance.cache_clear()  # every draw below is made under the refusing planners
 
     def refuse(*args, **kwargs):
-        raise AssertionError("a construction order was searched for perceive")
+        raise AssertionError("a construction order was searched for a scene case")
 
     for planner in (dom.robot_reference_planner, dom.reference_planner):
         monkeypatch.setattr(type(planner), "order", refuse)
@@ -222,5 +222,9 @@ def test_perceive_scenes_are_drawn_without_searching_an_order(name, monkeypatch)
         for a, b in zip(ordered, drawn, strict=True)
     ]
     assert same.count(True) >= 3, same
-    cases = build_cases(dom, "perceive", Budget(name="b", observations=4, hidden=1), seed=2)
-    assert len(cases["observations"]) == 4
+    small = Budget(name="b", observations=4, hidden=1, instances=3, composed=2)
+    assert len(build_cases(dom, "perceive", small, seed=2)["observations"]) == 4
+    composed = 2 if dom.composed_goals is not None else 0
+    assert len(build_cases(dom, "relate", small, seed=2)["scenes"]) == 2 * (3 + composed)
+    rendered = build_cases(dom, "render", small, seed=2)["scenes"]
+    assert sum(bool(v.get("image")) for v in rendered) == len(small.render_cases)
