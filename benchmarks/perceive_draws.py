@@ -1,10 +1,14 @@
 """How often a `perceive` program gets a drawn check observation wrong.
 
     python -m benchmarks.perceive_draws --domain cubes --seeds 1 2 3 [--programs DIR]
+    python -m benchmarks.perceive_draws --domain assembly --seeds 101 102 --azimuth 40 75
 
 Draws the `perceive` check's observations from each case seed (`checks.inputs.build_cases`, the
 default budget: 45 a seed), calls the program on each in a local sandbox session, exactly as
 the check calls it, and scores it as `property.accuracy` does (`sim.score.state_accuracy`).
+`--azimuth LO HI` draws every camera from that slice of the domain's camera envelope (no named
+view, no hiding case; azimuth 0 looks from +x, the robot's side): the sides of the envelope,
+where parts line up along the view, are where `perceive` goes wrong most.
 Prints every wrong observation (case, camera, the objects off and by how much) and the rate,
 and how many readings could not stand as perceived (`geometry.scene_problems` at the trials'
 tolerances: parts interpenetrating by more than `TOLERANCES.penetration`, unsupported or
@@ -44,12 +48,31 @@ def wrong_reading(score) -> dict:
     }
 
 
-def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[int], progress):
-    import domains
+def drawn_observations(domain, seed: int, azimuth: tuple[float, float] | None) -> list[dict]:
+    """The perceive check's observations of case seed `seed` or, with `azimuth`, as many drawn
+    the same way through cameras of that slice of the envelope only."""
+    import dataclasses
+
     from checks.budget import DEFAULT
+    from checks.inputs import build_cases, perceive_cases
+
+    if azimuth is None:
+        return build_cases(domain, "perceive", DEFAULT, seed)["observations"]
+    envelope = dataclasses.replace(domain.camera_envelope, azimuth=azimuth)
+    budget = dataclasses.replace(DEFAULT, name="side", hidden=0)
+    return perceive_cases(domain, budget, seed, envelope=envelope)
+
+
+def wrong_observations(
+    domain_name: str,
+    sources: dict[str, str],
+    seeds: list[int],
+    progress,
+    azimuth: tuple[float, float] | None = None,
+):
+    import domains
     from checks.calls import session_modules
     from checks.context import DomainSpec
-    from checks.inputs import build_cases
     from checks.suites.perceive import reading_score
     from geometry import scene_problems
     from sandbox import MESHES, Program
@@ -67,7 +90,7 @@ def wrong_observations(domain_name: str, sources: dict[str, str], seeds: list[in
             raise SystemExit(f"the programs do not load: {s.load}")
         for seed in seeds:
             t0 = time.perf_counter()
-            cases = build_cases(dom, "perceive", DEFAULT, seed)["observations"]
+            cases = drawn_observations(dom, seed, azimuth)
             built = time.perf_counter() - t0
             wrong = 0
             for case in cases:
@@ -119,10 +142,33 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     p.add_argument("--programs", type=Path, help="default: domains/DOMAIN/programs")
     p.add_argument("--json", type=Path, help="write the wrong observations here")
+    p.add_argument(
+        "--azimuth",
+        type=float,
+        nargs=2,
+        metavar=("LO", "HI"),
+        help="draw every camera from this azimuth slice of the envelope [deg]",
+    )
     args = p.parse_args(argv)
+    azimuth = None
+    if args.azimuth is not None:
+        import domains
+
+        lo, hi = args.azimuth
+        full = domains.load(args.domain).camera_envelope.azimuth
+        if not full[0] <= lo < hi <= full[1]:
+            p.error(
+                f"--azimuth {lo:g} {hi:g}: need LO < HI within the {args.domain} envelope's "
+                f"azimuth, {full[0]:g} to {full[1]:g} degrees"
+            )
+        azimuth = (lo, hi)
     sources = program_sources(args.domain, args.programs)
     rows, total, invalid = wrong_observations(
-        args.domain, sources, args.seeds, lambda line: print(line, file=sys.stderr, flush=True)
+        args.domain,
+        sources,
+        args.seeds,
+        lambda line: print(line, file=sys.stderr, flush=True),
+        azimuth,
     )
     for r in rows:
         print(json.dumps(r))

@@ -30,7 +30,7 @@ from checks.robot import robot_view
 from contracts.errors import UsageError
 from contracts.functions import FUNCTIONS
 from domains import Domain
-from domains.cameras import resized
+from domains.cameras import CameraEnvelope, resized
 
 HALF_RES = 2  # image checks render at 1/2 of the observation's resolution …
 IMAGE_PIXEL_MAX = 0.0016  # [m] … or finer, so that a pixel covers at most this at the scene
@@ -303,9 +303,13 @@ def image_factor(camera: Mapping, recs: list[dict]) -> float:
     return next((f for f in fits if pixel / f <= IMAGE_PIXEL_MAX), fits[-1])
 
 
-def perceive_cases(domain: Domain, budget: Budget, seed: int) -> list[dict[str, Any]]:
+def perceive_cases(
+    domain: Domain, budget: Budget, seed: int, *, envelope: CameraEnvelope | None = None
+) -> list[dict[str, Any]]:
     """`budget.observations` observations drawn from the task's space (see the module
-    docstring), `budget.hidden` of them the task text's hiding case where the domain has one."""
+    docstring), `budget.hidden` of them the task text's hiding case where the domain has one.
+    `envelope`: every other camera drawn from it instead (no named view), e.g. one side of
+    the domain's (`python -m benchmarks.perceive_draws --azimuth`)."""
     rng = _rng(seed, "perceive")
     out: list[dict[str, Any]] = []
     for _seed_h, recs, behind in hidden_views(domain, rng, budget.hidden):
@@ -321,7 +325,8 @@ def perceive_cases(domain: Domain, budget: Budget, seed: int) -> list[dict[str, 
             )
         )
     pool = iter(instances(domain, rng, budget.observations, scenes_only=True))
-    envelope = domain.camera_envelope
+    named = envelope is None
+    envelope = domain.camera_envelope if envelope is None else envelope
     while len(out) < budget.observations:
         drawn = composed_scene(domain, rng) if rng.random() < COMPOSED_SHARE else None
         if drawn is not None:
@@ -332,7 +337,7 @@ def perceive_cases(domain: Domain, budget: Budget, seed: int) -> list[dict[str, 
                 break
             side = "start" if rng.random() < 0.5 else "goal"
             kind, recs = "generated", records(inst.start if side == "start" else inst.goal)
-        if rng.random() < NAMED_VIEW_SHARE:
+        if rng.random() < NAMED_VIEW_SHARE and named:
             cam_name = str(rng.choice(list(domain.cameras)))
             true_camera = domain.camera(cam_name)
         else:

@@ -228,3 +228,26 @@ def test_scene_cases_are_drawn_without_searching_an_order(name, monkeypatch):
     assert len(build_cases(dom, "relate", small, seed=2)["scenes"]) == 2 * (3 + composed)
     rendered = build_cases(dom, "render", small, seed=2)["scenes"]
     assert sum(bool(v.get("image")) for v in rendered) == len(small.render_cases)
+
+
+def test_perceive_cases_can_be_drawn_through_one_side_of_the_envelope():
+    """`perceive_cases(envelope=…)` (`benchmarks.perceive_draws --azimuth`): every camera is
+    drawn from that slice of the envelope, none is a named view; a slice outside the domain's
+    envelope is refused with its range."""
+    import dataclasses
+    import math
+
+    from benchmarks.perceive_draws import main
+    from checks.inputs import perceive_cases
+
+    dom = domains.load("cubes")
+    side = dataclasses.replace(dom.camera_envelope, azimuth=(40.0, 75.0))
+    cases = perceive_cases(dom, Budget(name="b", observations=6, hidden=0), 3, envelope=side)
+    assert len(cases) == 6
+    for case in cases:
+        assert case["camera_name"] == "drawn"
+        axis = np.asarray(case["render_camera"]["T_world_camera"], float)[:3, 2]  # true camera
+        assert 40.0 <= math.degrees(math.atan2(-axis[1], -axis[0])) <= 75.0
+    with pytest.raises(SystemExit) as refused:
+        main(["--domain", "cubes", "--azimuth", "60", "90"])
+    assert refused.value.code == 2
