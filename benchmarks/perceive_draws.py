@@ -1,14 +1,15 @@
 """How often a `perceive` program gets a drawn check observation wrong.
 
     python -m benchmarks.perceive_draws --domain cubes --seeds 1 2 3 [--programs DIR]
-    python -m benchmarks.perceive_draws --domain assembly --seeds 101 102 --azimuth 40 75
+    python -m benchmarks.perceive_draws --domain assembly --seeds 201 202 --azimuth 40 75
 
 Draws the `perceive` check's observations from each case seed (`checks.inputs.build_cases`, the
 default budget: 45 a seed), calls the program on each in a local sandbox session, exactly as
 the check calls it, and scores it as `property.accuracy` does (`sim.score.state_accuracy`).
 `--azimuth LO HI` draws every camera from that slice of the domain's camera envelope (no named
-view, no hiding case; azimuth 0 looks from +x, the robot's side): the sides of the envelope,
-where parts line up along the view, are where `perceive` goes wrong most.
+view, no hiding case; azimuth 0 looks from +x, the robot's side): a slice where parts hide
+behind structures can be far weaker than the whole envelope (docs/checks.md: the assembly
+`perceive` by side of the envelope).
 Prints every wrong observation (case, camera, the objects off and by how much) and the rate,
 and how many readings could not stand as perceived (`geometry.scene_problems` at the trials'
 tolerances: parts interpenetrating by more than `TOLERANCES.penetration`, unsupported or
