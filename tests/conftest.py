@@ -85,6 +85,7 @@ def _drawn_cases_kept():
 LONGEST = ("tests/agent/test_author_replay.py::test_replayed_authoring_",)
 
 
+@pytest.hookimpl(optionalhook=True)  # pytest-xdist's hook: absent under `-p no:xdist`
 def pytest_xdist_make_scheduler(config, log):
     if config.getvalue("dist") != "loadfile":
         return None
