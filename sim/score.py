@@ -146,7 +146,9 @@ def object_errors(domain: Domain, estimate: Any, truth: Any) -> list[ObjectError
     return out
 
 
-def _edges(graph: Mapping) -> set[tuple[str, str, str]]:
+def reference_edges(domain: Domain, records: Any) -> set[tuple[str, str, str]]:
+    """The domain's reference relations of `records` as (source, target, type) triples."""
+    graph = domain.reference_relations(records)
     return {(str(e["source"]), str(e["target"]), str(e.get("type", ""))) for e in graph["edges"]}
 
 
@@ -162,8 +164,8 @@ def state_accuracy(domain: Domain, perceived: Any, truth: Any) -> StateScore:
     valid_est = [r for r in est if r["id"] in ids and r["mesh"] == domain.object(r["id"]).mesh]
     if len(valid_est) != len(est):
         extra += sorted({r["id"] for r in est if r not in valid_est and r["id"] in ids})
-    g_true = _edges(domain.reference_relations(true))
-    g_est = _edges(domain.reference_relations(valid_est)) if valid_est else set()
+    g_true = reference_edges(domain, true)
+    g_est = reference_edges(domain, valid_est) if valid_est else set()
     rel_ok = g_true == g_est
     correct = not missing and not extra and rel_ok and all(e.within for e in errors)
     return StateScore(

@@ -420,8 +420,10 @@ def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score
     the true scene drawn with that one object where `recs` put it differs from the true
     scene's drawing in fewer than `TELL_PX` pixels at the image check's resolution (the
     silhouettes, or the depth by more than `TELL_DEPTH`), and has the same reference relations
-    (so it holds up what it holds up). Only for a reading with every object reported once."""
-    from sim.score import state_accuracy
+    (so it holds up what it holds up). An object the true drawing shows nowhere that holds
+    nothing up, there or where `recs` put it, keeps only the others' relations: what it rests
+    on or stands beside is where it stands, which the image cannot say (the rule text). Only
+    for a reading with every object reported once."""
     from toolbox import render_scene
 
     if score.correct or score.missing or score.extra or "reference_camera" not in case:
@@ -435,9 +437,10 @@ def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score
         if e.within or e.id not in got:
             continue
         moved = [dict(o, pose=got[o["id"]]["pose"]) if o["id"] == e.id else o for o in truth]
-        if not state_accuracy(domain, moved, truth).relations_correct:
-            continue
         base = base or render_scene(truth, meshes, camera)
+        unseen = not (base["mask"] == [o["id"] for o in truth].index(e.id)).any()
+        if not _relations_kept(domain, moved, truth, e.id if unseen else None):
+            continue
         drawn = render_scene(moved, meshes, camera)
         both = (base["mask"] >= 0) & (drawn["mask"] >= 0)
         changed = (base["mask"] != drawn["mask"]) | (
@@ -446,6 +449,22 @@ def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score
         if int(changed.sum()) < TELL_PX:
             out.add(e.id)
     return out
+
+
+def _relations_kept(domain: Any, moved: list[dict], truth: list[dict], free: str | None) -> bool:
+    """Whether `moved` has the reference relations of `truth`; with `free` (an object nothing
+    shows), those of `free` itself are left out where it holds nothing up in either."""
+    from sim.score import reference_edges, state_accuracy
+
+    score = state_accuracy(domain, moved, truth)
+    if score.relations_correct:
+        return True
+    if free is None:
+        return False
+    differ = score.missing_edges + score.extra_edges
+    edges = reference_edges(domain, truth) | reference_edges(domain, moved)
+    holds = any(t == free and kind == "on" for _, t, kind in edges)
+    return not holds and all(free in (a, b) for a, b, _ in differ)
 
 
 def calibration_pixels(case: Mapping[str, Any]) -> int:

@@ -310,3 +310,56 @@ def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
     assert read(-0.015, 0).status == "passed"
     sideways = read(0, 0.011)
     assert sideways.status == "failed" and "'yellow' is 11.0 mm off" in sideways.message
+
+
+@pytest.mark.slow
+def test_where_a_part_nothing_shows_rests_is_not_scored(tmp_path):
+    """A cube nothing shows that holds nothing up (yellow, on a cube hidden behind a tower of
+    four) may
+    be read resting anywhere out of sight, on the table behind the others, although its own
+    relation changes (the rule: the image cannot say where it stands). The hidden cube under
+    it holds it up: read where it no longer carries it, it fails."""
+    from checks.inputs import observation_case
+    from checks.suites import perceive as perceive_suite
+
+    dom = domains.load("cubes")
+
+    def rec(oid, x, y, z):
+        return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
+
+    h, x0 = 0.02, 0.55
+    behind = x0 - 2 * h - 0.012
+    scene = [
+        rec("red", x0, 0, h),
+        rec("green", x0, 0, 3 * h),
+        rec("blue", x0, 0, 5 * h),
+        rec("purple", behind, 0, h),
+        rec("yellow", behind, 0, 3 * h),
+        rec("cyan", x0, 0, 7 * h),
+    ]
+    case = observation_case(dom, "obs01/behind", scene, dom.camera("front"), "front", 1)
+    ids = [o["id"] for o in case["truth"]]
+    shown = case["reference"]["full"]["mask"]
+    assert not (shown == ids.index("yellow")).any() and not (shown == ids.index("purple")).any()
+    ctx = SuiteContext(
+        function="perceive",
+        spec=DomainSpec.of(dom),
+        cases={"observations": [case]},
+        budget=DEFAULT,
+        draft=InProcess(lambda *a: None),
+        out_dir=tmp_path,
+    )
+
+    def read(oid, dx, dz):
+        records = [dict(o, pose=np.array(o["pose"], float)) for o in case["truth"]]
+        for o in records:
+            if o["id"] == oid:
+                o["pose"][0, 3] += dx
+                o["pose"][2, 3] += dz
+        ctx.outputs["perceived"] = {case["name"]: records}
+        return perceive_suite.accuracy(ctx, dom)
+
+    on_the_table = read("yellow", -0.05, -2 * h)
+    assert on_the_table.status == "passed", on_the_table.message
+    carried = read("purple", -0.05, 0)
+    assert carried.status == "failed" and "'purple' is 50.0 mm off" in carried.message
