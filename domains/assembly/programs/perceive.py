@@ -95,6 +95,7 @@ GRID_CELL = 0.0025  # [m]
 GRID_MARGIN = 0.025  # [m]
 NEIGHBOURS = 6
 TURN_EVIDENCE = 0.1  # refiner cost above which a part's pose explains its segment badly
+TURN_RATIO = 4  # a turn explaining a part's segment this many times better is taken
 FEW_PIXELS = 40  # working pixels (`PoseFit.pixels`): a part showing fewer is a sliver
 SMALL_TURN = np.radians(60)  # a turn a sliver cannot show
 RESEARCH_SHIFT = 0.06  # [m] how far a part searched again may move from its points' centre
@@ -779,8 +780,9 @@ def _mirrored(observation, meshes, camera, poses, shapes, parts, labels):
     """A part carried on two supporters (a beam or the arch on two pillars) rests centred on
     them. Where one supporter shows only a sliver (fewer than WEAK_PIXELS) and the other is
     well seen, the sliver's fit can slide along the view ray or along the load; the weak
-    supporter is tried at the mirror of the other through the load's centre of mass, refined
-    there by at most MIRROR_MIN, and moved there when that explains its segment as well
+    supporter is tried at the mirror of the other through the load's centre of mass, with its
+    own heading and with the other's, refined there by at most MIRROR_MIN, and moved there
+    when that explains its segment as well
     (the refiner's cost, within MIRROR_SLACK) and touches nothing."""
     sup = supports(_records(poses), shapes, contact_tol=0.003)
     pixels = {i: p.pixels for i, p in parts.items()}
@@ -802,7 +804,10 @@ def _mirrored(observation, meshes, camera, poses, shapes, parts, labels):
             continue
         ids = [i for i in PARTS if i in out]
         segment = {weak: labels == list(PARTS).index(weak)}
-        fits = [
+        # at the mirror, the weak supporter keeps its own heading or takes the seen one's
+        S = M.copy()
+        S[:3, :3] = out[strong][:3, :3]
+        now, *mirrors = [
             refine_poses(
                 observation,
                 meshes,
@@ -818,11 +823,13 @@ def _mirrored(observation, meshes, camera, poses, shapes, parts, labels):
             for pose, kw in (
                 (out[weak], {"iterations": 1, "max_shift": 1e-4}),
                 (M, {"max_shift": MIRROR_MIN}),
+                (S, {"max_shift": MIRROR_MIN}),
             )
         ]
-        if fits[1].cost > fits[0].cost + MIRROR_SLACK:
+        best = min(mirrors, key=lambda f: f.cost)
+        if best.cost > now.cost + MIRROR_SLACK:
             continue
-        M[:3, :3], M[:2, 3] = fits[1].pose[:3, :3], fits[1].pose[:2, 3]
+        M[:3, :3], M[:2, 3] = best.pose[:3, :3], best.pose[:2, 3]
         trial = {**out, weak: M}
         hits = collisions(_records(trial), shapes, tolerance=CONFLICT_DEPTH)
         if not any(weak in (a, b) and b != "table" for a, b, _ in hits):
@@ -844,9 +851,12 @@ def _kept_heading(fit, T):
 def _better(fit, cost):
     """Whether a refined fit explains its segment better than the pose it started from
     (cost `cost`): a turn of it only when the start explains the segment badly and the turn
-    at least twice as well."""
+    at least twice as well, or when the part shows more than a sliver and the turn explains
+    it TURN_RATIO times better (a block half hidden behind others, fitted across)."""
     if fit.hypothesis == "given":
         return fit.cost < cost
+    if fit.pixels >= FEW_PIXELS and fit.cost * TURN_RATIO < cost:
+        return True
     return cost > TURN_EVIDENCE and fit.cost < cost / 2
 
 
