@@ -27,13 +27,16 @@
    each other, and moved until the drawing matches their colour segments and the depth. A part
    takes the refined pose where it explains the segment better than the pose it started from
    (the refiner's cost); a quarter or half turn only where the start explains it badly and the
-   turn at least twice as well. A part still explained badly is searched again from the centre
+   turn at least twice as well, or where the part shows more than a sliver and the turn
+   explains it four times better (a block half hidden behind others, fitted across). A part
+   still explained badly is searched again from the centre
    of its points (the ICP's pose can sit a part-length off, turned). A sliver (a few pixels)
    keeps its heading unless the refiner turns it far: it shows where the part is and which
    faces show, but a small turn moves its pixels no more than the calibration error does.
 6. Centred loads: a beam or the arch rests centred on its two pillars. A pillar that shows
    only a sliver behind the other is tried at the mirror of the seen one through the load's
-   centre, and moved there where that explains its sliver as well.
+   centre, with its own heading and with the seen one's, and moved there where that explains
+   its sliver as well.
 """
 
 import hashlib
