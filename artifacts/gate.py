@@ -12,7 +12,9 @@ a view.
 A failed trial is attributed to its stage (`sim.trials`): perception → `perceive`, relations
 → `relate`, planning → `plan`. The gate passes when no trial fails for a program's reason;
 trials the robot itself fails (grasp, motion, execution) are reported and not held against
-the programs — the executor alone fails about 1 % of trials (docs/results.md). The first
+the programs — the executor alone fails about 1 % of trials (docs/results.md) — nor are trials
+whose perceived states are wrong only where the observation cannot tell (`untold_misreadings`:
+the perceive check's rule, e.g. a block hidden under the cylinder, read turned). The first
 blamed trial's feedback (what went wrong, its observations) is what the responsible function's
 next attempt is shown.
 
@@ -90,6 +92,10 @@ class GateResult:
                 if t["failure"] is None
                 else f" — {t['failure']['stage']}: {t['failure']['reason']}"
             )
+            if t.get("untold"):
+                mark = "unseen"
+                parts = "; ".join(f"{k}: {', '.join(v)}" for k, v in t["untold"].items())
+                why += f" (the image cannot tell: {parts}; held against no program)"
             lines.append(f"- {mark} {t['name']} ({t['camera']}){why}")
         if not self.passed:
             lines.append(
@@ -148,6 +154,35 @@ def _blame(result: Mapping[str, Any]) -> str | None:
     return None
 
 
+def untold_misreadings(
+    domain: Domain, inst: Instance, camera: Mapping, result: Mapping[str, Any]
+) -> dict[str, list[str]]:
+    """{side: ids} when every object a trial's perceived start and goal got wrong is one the
+    observation cannot tell from the truth (`checks.suites.perceive.reading_score`, as
+    `property.accuracy` scores a reading: a block hidden under the cylinder, read turned);
+    {} when any misreading could be told, or the trial kept no perceived states. Such a trial
+    is reported and held against no program."""
+    from checks.context import DomainSpec
+    from checks.inputs import image_factor, records
+    from checks.suites.perceive import reading_score
+    from domains.cameras import resized
+
+    perceived = result.get("perceived")
+    if not perceived:
+        return {}
+    meshes = DomainSpec.of(domain).meshes
+    out: dict[str, list[str]] = {}
+    for side, scene in (("start", inst.start), ("goal", inst.goal)):
+        truth = records(scene)
+        case = {"truth": truth, "reference_camera": resized(camera, image_factor(camera, truth))}
+        score, untold = reading_score(domain, meshes, case, perceived[side])
+        if not score.correct:
+            return {}
+        if untold:
+            out[side] = sorted(untold)
+    return out
+
+
 def _observation_pngs(domain: Domain, inst: Instance, cam: dict, folder: Path) -> list[str]:
     """The trial's start and goal observations (as the trial made them) as PNGs."""
     from PIL import Image
@@ -199,9 +234,12 @@ def run_gate(
     try:
         for k, (inst, cam) in enumerate(gate_instances(domain, seed, trials)):
             name = f"trial{k + 1:02d}/{'composed' if inst.name.startswith('composed/') else 'generated'}"
-            result = run_trial(domain, inst, policy, camera=cam).to_dict()
+            result = run_trial(domain, inst, policy, camera=cam, keep_states=True).to_dict()
             failure = result["failure"]
             blamed = _blame(result)
+            untold = untold_misreadings(domain, inst, cam, result) if blamed == "perceive" else {}
+            if untold:
+                blamed = None
             rows.append(
                 {
                     "name": name,
@@ -213,6 +251,7 @@ def run_gate(
                     if failure is None
                     else {"stage": failure["stage"], "reason": str(failure["reason"])[:300]},
                     "blamed": blamed,
+                    **({"untold": untold} if untold else {}),
                 }
             )
             if blamed is not None:

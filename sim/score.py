@@ -88,7 +88,7 @@ class FinalScore:
         }
 
 
-def _records(value: Any) -> list[Mapping]:
+def records_of(value: Any) -> list[Mapping]:
     """Records from a scene, a state ``{"objects", "relations"}`` or a list of records."""
     if isinstance(value, Mapping):
         return list(value["objects"])
@@ -136,9 +136,9 @@ def object_errors(domain: Domain, estimate: Any, truth: Any) -> list[ObjectError
 
     Objects missing from `estimate` are left out (see `state_accuracy` for them).
     """
-    est = {r["id"]: r for r in _records(estimate)}
+    est = {r["id"]: r for r in records_of(estimate)}
     out = []
-    for t in _records(truth):
+    for t in records_of(truth):
         if t["id"] in est:
             out.append(
                 object_error(domain, t["mesh"], est[t["id"]]["pose"], t["pose"], object_id=t["id"])
@@ -154,8 +154,8 @@ def reference_edges(domain: Domain, records: Any) -> set[tuple[str, str, str]]:
 
 def state_accuracy(domain: Domain, perceived: Any, truth: Any) -> StateScore:
     """State accuracy of a perceived state (or records) against the true scene."""
-    est = _records(perceived)
-    true = _records(truth)
+    est = records_of(perceived)
+    true = records_of(truth)
     ids = {r["id"] for r in true}
     est_ids = [r["id"] for r in est]
     missing = sorted(ids - set(est_ids))
@@ -191,7 +191,7 @@ def final_success(
     """
     from sim.settle import MOTION, settle
 
-    recs = _records(final)
+    recs = records_of(final)
     errors = object_errors(domain, recs, goal)
     motion: dict[str, float] = {}
     at_rest = True
@@ -199,7 +199,7 @@ def final_success(
         result = settle(domain, {"domain": domain.name, "objects": recs})
         motion = result.motion
         at_rest = all(m <= MOTION for m in motion.values())
-    complete = {e.id for e in errors} == {r["id"] for r in _records(goal)}
+    complete = {e.id for e in errors} == {r["id"] for r in records_of(goal)}
     success = complete and released and at_rest and all(e.within for e in errors)
     return FinalScore(
         success=success, objects=errors, released=released, at_rest=at_rest, motion=motion

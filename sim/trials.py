@@ -52,7 +52,7 @@ from sim.faults import draw as draw_fault
 from sim.loop import ClosedLoop, RecoveryBudget
 from sim.observation import Renderer, observe, release_renderers
 from sim.scene import body_name, build_spec
-from sim.score import final_success, state_accuracy
+from sim.score import final_success, records_of, state_accuracy
 from sim.sensing import EXACT, WRIST_CAMERA, Sensors
 from sim.settle import check_order
 
@@ -191,6 +191,8 @@ class TrialResult:
     loop: dict | None = None  # the closed loop's record (`sim.loop.ClosedLoop.to_dict`)
     fault: dict | None = None  # the injected fault and what it did (`sim.faults.Fault`)
     fit: dict | None = None  # the policy's fit of each perceived state (`artifacts.fit`)
+    # the perceived start and goal records, when asked for (`run_trial(keep_states=True)`)
+    perceived: dict[str, list[dict]] | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -207,7 +209,16 @@ class TrialResult:
             **({"loop": self.loop} if self.loop is not None else {}),
             **({"fault": self.fault} if self.fault is not None else {}),
             **({"fit": self.fit} if self.fit is not None else {}),
+            **(
+                {"perceived": {k: _plain(v) for k, v in self.perceived.items()}}
+                if self.perceived is not None
+                else {}
+            ),
         }
+
+
+def _plain(records: list[dict]) -> list[dict]:
+    return [{**r, "pose": np.asarray(r["pose"], float).round(6).tolist()} for r in records]
 
 
 def _seed(name: str, side: str) -> int:
@@ -274,13 +285,15 @@ def run_trial(
     loop: Loop = "open",
     faults: Sequence[str] = (),
     budget: RecoveryBudget | None = None,
+    keep_states: bool = False,
 ) -> TrialResult:
     """Run one trial end to end; see the module docstring. `camera`: a view name or a camera
     dict (the true camera; the policy gets it calibrated). `deadline_s`: the trial's wall-clock
     deadline [s], counted from its start. `loop`: "open" (the paper's protocol: the plan runs
     to its end) or "closed" (`sim.loop`: look again after each transfer and replan, with the
     policy's programs and `budget`). `faults`: the names (`sim.faults.FAULTS`) one fault of the
-    trial is drawn from; none when empty."""
+    trial is drawn from; none when empty. `keep_states`: the result keeps the perceived start
+    and goal records (`TrialResult.perceived`; the trial gate judges them)."""
     if loop not in ("open", "closed"):
         raise UsageError(f"loop must be 'open' or 'closed', got {loop!r}")
     if loop == "closed" and not callable(getattr(policy, "programs", None)):
@@ -546,6 +559,9 @@ def run_trial(
         loop=loop_record,
         fault=None if fault is None else fault.to_dict(),
         fit=out.fit,
+        perceived={"start": records_of(out.start_state), "goal": records_of(out.goal_state)}
+        if keep_states and out.start_state is not None
+        else None,
     )
     if record_dir is not None:
         _write_record(record_dir, domain, instance, camera, protocol, loop, out, plan,

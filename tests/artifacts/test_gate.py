@@ -101,3 +101,51 @@ def test_a_trial_the_robot_finished_is_marked_failed_when_held_against_a_program
     assert "held against `plan`" in text
     assert "- ok trial01/generated" in text
     assert "- FAIL trial02/generated (960x540) — planning: the plan does not reach" in text
+
+
+def test_a_misreading_the_image_cannot_tell_is_held_against_no_program():
+    """A cube hidden behind a tower (`untold_misreadings`, the perceive check's rule): read
+    15 mm farther back, still hidden, it is reported as what the image cannot tell; read
+    11 mm to the side, where a strip of it would show, it is held against `perceive`."""
+    import numpy as np
+
+    import domains
+    from artifacts.gate import GateResult, untold_misreadings
+    from domains.instance import Instance
+
+    dom = domains.load("cubes")
+
+    def rec(oid, x, y, z):
+        return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
+
+    h, x0 = 0.02, 0.55
+    scene = dom.scene(
+        [
+            rec("red", x0, 0, h),
+            rec("green", x0, 0, 3 * h),
+            rec("blue", x0, 0, 5 * h),
+            rec("yellow", x0 - 2 * h - 0.012, 0, h),
+            rec("purple", 0.45, 0.2, h),
+            rec("cyan", 0.45, -0.2, h),
+        ]
+    )
+    inst = Instance(domain="cubes", name="hidden", seed=None, start=scene, goal=scene)
+    truth = [dict(o, pose=np.asarray(o["pose"], float).tolist()) for o in scene["objects"]]
+
+    def read(dx, dy):
+        out = [dict(o, pose=np.array(o["pose"], float)) for o in truth]
+        for o in out:
+            if o["id"] == "yellow":
+                o["pose"][:2, 3] += (dx, dy)
+        return {"perceived": {"start": truth, "goal": out}}
+
+    camera = dom.camera("front")
+    assert untold_misreadings(dom, inst, camera, read(-0.015, 0)) == {"goal": ["yellow"]}
+    assert untold_misreadings(dom, inst, camera, read(0, 0.011)) == {}
+    assert untold_misreadings(dom, inst, camera, {"failure": None}) == {}
+    row = {"name": "trial01/generated", "camera": "1280x720", "state_ok": False,
+           "plan_ok": True, "final_ok": True, "blamed": None, "untold": {"goal": ["yellow"]},
+           "failure": {"stage": "perception", "reason": "goal: yellow off by 15.0 mm"}}  # fmt: skip
+    text = GateResult(domain="cubes", seed=1, trials=[row], duration_s=1.0).markdown()
+    assert "passed." in text and "- unseen trial01/generated" in text
+    assert "the image cannot tell: goal: yellow; held against no program" in text
