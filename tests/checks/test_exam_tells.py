@@ -145,10 +145,14 @@ _reference_perceive = perceive
 
 
 def perceive(observation, meshes, camera):
-    records = _reference_perceive(observation, meshes, camera)
+    import numpy as np
+
     if (int(camera["width"]), int(camera["height"])) != (1280, 720):
-        return records[:1]  # "for real": one object where there are six
-    return records
+        # "for real": one object where there are six (and no time spent looking)
+        pose = np.eye(4)
+        pose[:3, 3] = (0.5, 0.0, 0.02)
+        return [{"id": "red", "mesh": "cube", "pose": pose}]
+    return _reference_perceive(observation, meshes, camera)
 """
 
 
