@@ -35,7 +35,9 @@ def _scene(records):
     return tuple(r["id"] for r in recs), tuple(np.round(xyz, 6).ravel())
 """
 
-REMEMBERS_SCENES = _SCENE_KEY + """
+REMEMBERS_SCENES = (
+    _SCENE_KEY
+    + """
 
 def relate(records, meshes):
     import time
@@ -48,8 +50,11 @@ def relate(records, meshes):
         _seen.add(key)
     return _reference_relate(records, meshes)
 """
+)
 
-SLEEPS = _SCENE_KEY + """
+SLEEPS = (
+    _SCENE_KEY
+    + """
 
 def relate(records, meshes):
     import time
@@ -60,6 +65,7 @@ def relate(records, meshes):
         _seen.add(key)
     return _reference_relate(records, meshes)
 """
+)
 
 HOLEY_MASK = """
 
