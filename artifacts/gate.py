@@ -155,7 +155,7 @@ def _blame(result: Mapping[str, Any]) -> str | None:
 
 
 def untold_misreadings(
-    domain: Domain, inst: Instance, camera: Mapping, result: Mapping[str, Any]
+    domain: Domain, inst: Instance, camera: dict, result: Mapping[str, Any]
 ) -> dict[str, list[str]]:
     """{side: ids} when every object a trial's perceived start and goal got wrong is one the
     observation cannot tell from the truth (`checks.suites.perceive.reading_score`, as

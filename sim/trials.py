@@ -192,7 +192,7 @@ class TrialResult:
     fault: dict | None = None  # the injected fault and what it did (`sim.faults.Fault`)
     fit: dict | None = None  # the policy's fit of each perceived state (`artifacts.fit`)
     # the perceived start and goal records, when asked for (`run_trial(keep_states=True)`)
-    perceived: dict[str, list[dict]] | None = None
+    perceived: dict[str, list[Mapping]] | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -217,7 +217,7 @@ class TrialResult:
         }
 
 
-def _plain(records: list[dict]) -> list[dict]:
+def _plain(records: list[Mapping]) -> list[dict]:
     return [{**r, "pose": np.asarray(r["pose"], float).round(6).tolist()} for r in records]
 
 
