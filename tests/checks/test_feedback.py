@@ -315,10 +315,9 @@ def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
 @pytest.mark.slow
 def test_where_a_part_nothing_shows_rests_is_not_scored(tmp_path):
     """A cube nothing shows that holds nothing up (yellow, on a cube hidden behind a tower of
-    four) may
-    be read resting anywhere out of sight, on the table behind the others, although its own
-    relation changes (the rule: the image cannot say where it stands). The hidden cube under
-    it holds it up: read where it no longer carries it, it fails."""
+    four) may be read resting anywhere out of sight, on the table behind the others, although
+    its own relation changes (the rule: the image cannot say where it stands). The hidden cube
+    under it holds it up: read where it no longer carries it, it fails."""
     from checks.inputs import observation_case
     from checks.suites import perceive as perceive_suite
 
