@@ -265,6 +265,23 @@ def test_a_hidden_cube_is_not_scored_for_its_pose_but_the_visible_ones_are(tmp_p
     assert rows[seen]["within_tolerance"] is False
 
 
+def _upright(dom, oid: str, x: float, y: float, z: float) -> dict:
+    """`oid`'s record, unturned, its frame at (x, y, z)."""
+    return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
+
+
+def _judged_alone(dom, case: dict, tmp_path) -> SuiteContext:
+    """A perceive suite context holding observation `case` only (the outputs set by the test)."""
+    return SuiteContext(
+        function="perceive",
+        spec=DomainSpec.of(dom),
+        cases={"observations": [case]},
+        budget=DEFAULT,
+        draft=InProcess(lambda *a: None),
+        out_dir=tmp_path,
+    )
+
+
 @pytest.mark.slow
 def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
     """`property.accuracy` holds an object to the tolerance only where the image can tell: a
@@ -276,7 +293,7 @@ def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
     dom = domains.load("cubes")
 
     def rec(oid, x, y, z):
-        return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
+        return _upright(dom, oid, x, y, z)
 
     h, x0 = 0.02, 0.55
     scene = [
@@ -290,14 +307,7 @@ def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
     case = observation_case(dom, "obs01/behind", scene, dom.camera("front"), "front", 1)
     ids = [o["id"] for o in case["truth"]]
     assert not (case["reference"]["full"]["mask"] == ids.index("yellow")).any()
-    ctx = SuiteContext(
-        function="perceive",
-        spec=DomainSpec.of(dom),
-        cases={"observations": [case]},
-        budget=DEFAULT,
-        draft=InProcess(lambda *a: None),
-        out_dir=tmp_path,
-    )
+    ctx = _judged_alone(dom, case, tmp_path)
 
     def read(dx, dy):
         records = [dict(o, pose=np.array(o["pose"], float)) for o in case["truth"]]
@@ -324,7 +334,7 @@ def test_where_a_part_nothing_shows_rests_is_not_scored(tmp_path):
     dom = domains.load("cubes")
 
     def rec(oid, x, y, z):
-        return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
+        return _upright(dom, oid, x, y, z)
 
     h, x0 = 0.02, 0.55
     behind = x0 - 2 * h - 0.012
@@ -340,14 +350,7 @@ def test_where_a_part_nothing_shows_rests_is_not_scored(tmp_path):
     ids = [o["id"] for o in case["truth"]]
     shown = case["reference"]["full"]["mask"]
     assert not (shown == ids.index("yellow")).any() and not (shown == ids.index("purple")).any()
-    ctx = SuiteContext(
-        function="perceive",
-        spec=DomainSpec.of(dom),
-        cases={"observations": [case]},
-        budget=DEFAULT,
-        draft=InProcess(lambda *a: None),
-        out_dir=tmp_path,
-    )
+    ctx = _judged_alone(dom, case, tmp_path)
 
     def read(oid, dx, dz):
         records = [dict(o, pose=np.array(o["pose"], float)) for o in case["truth"]]
