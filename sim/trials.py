@@ -209,16 +209,8 @@ class TrialResult:
             **({"loop": self.loop} if self.loop is not None else {}),
             **({"fault": self.fault} if self.fault is not None else {}),
             **({"fit": self.fit} if self.fit is not None else {}),
-            **(
-                {"perceived": {k: _plain(v) for k, v in self.perceived.items()}}
-                if self.perceived is not None
-                else {}
-            ),
+            **({"perceived": to_jsonable(self.perceived)} if self.perceived is not None else {}),
         }
-
-
-def _plain(records: list[Mapping]) -> list[dict]:
-    return [{**r, "pose": np.asarray(r["pose"], float).round(6).tolist()} for r in records]
 
 
 def _seed(name: str, side: str) -> int:
