@@ -454,17 +454,13 @@ def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score
 def _relations_kept(domain: Any, moved: list[dict], truth: list[dict], free: str | None) -> bool:
     """Whether `moved` has the reference relations of `truth`; with `free` (an object nothing
     shows), those of `free` itself are left out where it holds nothing up in either."""
-    from sim.score import reference_edges, state_accuracy
+    from sim.score import reference_edges
 
-    score = state_accuracy(domain, moved, truth)
-    if score.relations_correct:
+    before, after = reference_edges(domain, truth), reference_edges(domain, moved)
+    if before == after:
         return True
-    if free is None:
-        return False
-    differ = score.missing_edges + score.extra_edges
-    edges = reference_edges(domain, truth) | reference_edges(domain, moved)
-    holds = any(t == free and kind == "on" for _, t, kind in edges)
-    return not holds and all(free in (a, b) for a, b, _ in differ)
+    holds = any(t == free and kind == "on" for _, t, kind in before | after)
+    return free is not None and not holds and all(free in (a, b) for a, b, _ in before ^ after)
 
 
 def calibration_pixels(case: Mapping[str, Any]) -> int:
