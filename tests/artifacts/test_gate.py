@@ -112,23 +112,10 @@ def test_a_misreading_the_image_cannot_tell_is_held_against_no_program():
     import domains
     from artifacts.gate import GateResult, untold_misreadings
     from domains.instance import Instance
+    from tests.scenes import cube_behind_tower
 
     dom = domains.load("cubes")
-
-    def rec(oid, x, y, z):
-        return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
-
-    h, x0 = 0.02, 0.55
-    scene = dom.scene(
-        [
-            rec("red", x0, 0, h),
-            rec("green", x0, 0, 3 * h),
-            rec("blue", x0, 0, 5 * h),
-            rec("yellow", x0 - 2 * h - 0.012, 0, h),
-            rec("purple", 0.45, 0.2, h),
-            rec("cyan", 0.45, -0.2, h),
-        ]
-    )
+    scene = dom.scene(cube_behind_tower(dom))
     inst = Instance(domain="cubes", name="hidden", seed=None, start=scene, goal=scene)
     truth = [dict(o, pose=np.asarray(o["pose"], float).tolist()) for o in scene["objects"]]
 

@@ -25,6 +25,7 @@ from checks.context import DomainSpec, SuiteContext
 from checks.rulebook import rule_map
 from contracts import validate
 from geometry import yaw_pose
+from tests.scenes import BEHIND, X0, H, cube_behind_tower, upright
 
 from .conftest import program
 
@@ -265,11 +266,6 @@ def test_a_hidden_cube_is_not_scored_for_its_pose_but_the_visible_ones_are(tmp_p
     assert rows[seen]["within_tolerance"] is False
 
 
-def _upright(dom, oid: str, x: float, y: float, z: float) -> dict:
-    """`oid`'s record, unturned, its frame at (x, y, z)."""
-    return dom.record(oid, np.array([[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]))
-
-
 def _judged_alone(dom, case: dict, tmp_path) -> SuiteContext:
     """A perceive suite context holding observation `case` only (the outputs set by the test)."""
     return SuiteContext(
@@ -291,19 +287,7 @@ def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
     from checks.suites import perceive as perceive_suite
 
     dom = domains.load("cubes")
-
-    def rec(oid, x, y, z):
-        return _upright(dom, oid, x, y, z)
-
-    h, x0 = 0.02, 0.55
-    scene = [
-        rec("red", x0, 0, h),
-        rec("green", x0, 0, 3 * h),
-        rec("blue", x0, 0, 5 * h),
-        rec("yellow", x0 - 2 * h - 0.012, 0, h),
-        rec("purple", 0.45, 0.2, h),
-        rec("cyan", 0.45, -0.2, h),
-    ]
+    scene = cube_behind_tower(dom)
     case = observation_case(dom, "obs01/behind", scene, dom.camera("front"), "front", 1)
     ids = [o["id"] for o in case["truth"]]
     assert not (case["reference"]["full"]["mask"] == ids.index("yellow")).any()
@@ -332,19 +316,13 @@ def test_where_a_part_nothing_shows_rests_is_not_scored(tmp_path):
     from checks.suites import perceive as perceive_suite
 
     dom = domains.load("cubes")
-
-    def rec(oid, x, y, z):
-        return _upright(dom, oid, x, y, z)
-
-    h, x0 = 0.02, 0.55
-    behind = x0 - 2 * h - 0.012
     scene = [
-        rec("red", x0, 0, h),
-        rec("green", x0, 0, 3 * h),
-        rec("blue", x0, 0, 5 * h),
-        rec("purple", behind, 0, h),
-        rec("yellow", behind, 0, 3 * h),
-        rec("cyan", x0, 0, 7 * h),
+        upright(dom, "red", X0, 0, H),
+        upright(dom, "green", X0, 0, 3 * H),
+        upright(dom, "blue", X0, 0, 5 * H),
+        upright(dom, "purple", BEHIND, 0, H),
+        upright(dom, "yellow", BEHIND, 0, 3 * H),
+        upright(dom, "cyan", X0, 0, 7 * H),
     ]
     case = observation_case(dom, "obs01/behind", scene, dom.camera("front"), "front", 1)
     ids = [o["id"] for o in case["truth"]]
@@ -361,7 +339,7 @@ def test_where_a_part_nothing_shows_rests_is_not_scored(tmp_path):
         ctx.outputs["perceived"] = {case["name"]: records}
         return perceive_suite.accuracy(ctx, dom)
 
-    on_the_table = read("yellow", -0.05, -2 * h)
+    on_the_table = read("yellow", -0.05, -2 * H)
     assert on_the_table.status == "passed", on_the_table.message
     carried = read("purple", -0.05, 0)
     assert carried.status == "failed" and "'purple' is 50.0 mm off" in carried.message
