@@ -19,8 +19,8 @@
 4. Physics: parts are settled lowest first onto the table or onto the parts under them (exact
    convex-piece geometry, `toolbox.separation`), side-by-side overlaps from noise are pushed
    apart, and a part that would float or tip over must stand on something the camera cannot
-   see: an unseen part of the right height is put under it (mirroring the visible one for a
-   beam or an arch on two pillars). A part that is not seen and not needed to hold anything up
+   see: an unseen part of the right height is put under it, on the table or on a seen part's
+   flat top (mirroring the visible one for a beam or an arch on two pillars). A part that is not seen and not needed to hold anything up
    is put where the camera cannot see it: behind a seen part, on the table, clear of the
    others (the task text: all eight are reported; where exactly is not scored).
 5. Render-and-compare (`toolbox.refine_poses`): the seen parts are drawn together, so they hide
@@ -555,9 +555,10 @@ def _lowest(shape, T):
     return float((pts @ T[:3, :3].T + T[:3, 3])[:, 2].min())
 
 
-def _settle(poses, shapes, order, moves=None):
+def _settle(poses, shapes, order, moves=None, missing_heights=()):
     """Drop (or lift) each part, lowest first, onto the table or the parts under it; `moves`
-    collects each part's vertical shift [m] and what it landed on."""
+    collects each part's vertical shift [m] and what it landed on. A part that floats by the
+    height of an unseen part stays where it is seen: the unseen part holds it up."""
     placed = {}
     for i in order:
         T = poses[i].copy()
@@ -566,7 +567,8 @@ def _settle(poses, shapes, order, moves=None):
             gap, axis = separation(shapes[i], T, shapes[j], U, cutoff=SETTLE_RANGE)
             if axis[2] >= 0.7 and -SETTLE_RANGE <= gap < drop:
                 drop, on = gap, j
-        if abs(drop) <= SETTLE_RANGE or drop < 0:
+        held = drop > SETTLE_TOL and any(abs(drop - h) < 0.006 for h in missing_heights)
+        if (abs(drop) <= SETTLE_RANGE or drop < 0) and not held:
             T[2, 3] -= drop
         elif moves is not None:
             on = None  # floating
@@ -600,7 +602,8 @@ def _push_apart(poses, shapes, pixels):
 
 
 def _hidden_supporters(poses, shapes, models, missing, pixels):
-    """Put unseen parts under parts that would otherwise float or tip over."""
+    """Put unseen parts under parts that would otherwise float or tip over: an unseen part of
+    the right height, on the table or on a seen part's flat top (pillars on the beam)."""
     missing = list(missing)
     for _ in range(len(missing)):
         if not missing:
@@ -622,12 +625,16 @@ def _hidden_supporters(poses, shapes, models, missing, pixels):
                 yaw = float(np.arctan2(U[1, 0], U[0, 0]))
             else:
                 xy, yaw = com[:2], float(np.arctan2(T[1, 0], T[0, 0]))
-            for m in sorted(missing, key=lambda k: (k not in [c for c in missing], k)):
+            for m in sorted(missing):
                 model = models[m]
-                height = model.highest[0] - model.lowest[0]
-                if abs(height - bottom) > 0.006:
+                base = bottom - (model.highest[0] - model.lowest[0])  # where m would stand
+                if base < -0.006:
                     continue
-                poses[m] = _pose(_rz(yaw) @ model.rests[0], [xy[0], xy[1], -model.lowest[0]])
+                z = base - model.lowest[0] if base > 0.006 else -model.lowest[0]
+                T_m = _pose(_rz(yaw) @ model.rests[0], [xy[0], xy[1], z])
+                if base > 0.006 and not _stands_on_a_part({**poses, m: T_m}, shapes, m):
+                    continue
+                poses[m] = T_m
                 pixels[m] = 0
                 missing.remove(m)
                 placed = True
@@ -637,6 +644,23 @@ def _hidden_supporters(poses, shapes, models, missing, pixels):
         if not placed:
             break
     return poses
+
+
+def _stands_on_a_part(poses, shapes, m):
+    """Whether part `m` rests, stably and inside nothing, on a part (not the table)."""
+    recs = _records(poses)
+    on = [j for j in supports(recs, shapes, contact_tol=0.003).get(m, []) if j != "table"]
+    if not on or m in unstable_objects(recs, shapes, contact_tol=0.003):
+        return False
+    return not any(m in (a, b) for a, b, _ in collisions(recs, shapes, tolerance=0.002))
+
+
+def _surfaces(poses, shapes):
+    """Heights [m] a part may stand at: the table and every part's highest point."""
+    return [0.0] + [
+        float((np.concatenate(shapes[i].pieces) @ T[:3, :3].T + T[:3, 3])[:, 2].max())
+        for i, T in poses.items()
+    ]
 
 
 def _out_of_sight(poses, shapes, models, missing, pixels, camera, meshes):
@@ -686,9 +710,12 @@ def _conflicts(poses, shapes, pixels, missing_heights, moves):
         if b != "table":
             out.add(min((a, b), key=lambda k: (pixels.get(k, 0), k)))
     sup = supports(recs, shapes, contact_tol=0.003)
+    surfaces = _surfaces(poses, shapes)
     for i, T in poses.items():
         bottom = _lowest(shapes[i], T)
-        if not sup[i] and not any(abs(h - bottom) < 0.006 for h in missing_heights):
+        if not sup[i] and not any(
+            abs(s + h - bottom) < 0.006 for h in missing_heights for s in surfaces
+        ):
             out.add(i)
     return out
 
@@ -706,7 +733,7 @@ def _choose(parts, shapes, missing_heights):
         poses = {i: _pose(h[2], h[3]) for i, h in ch.items()}
         moves = {}
         order = sorted(poses, key=lambda i: (_lowest(shapes[i], poses[i]), i))
-        poses = _settle(poses, shapes, order, moves)
+        poses = _settle(poses, shapes, order, moves, missing_heights)
         return poses, _conflicts(poses, shapes, pixels, missing_heights, moves)
 
     poses, conflicts = posed(choice)
@@ -898,7 +925,9 @@ def perceive(observation, meshes, camera):
     # the refiner judges the image only: settle its poses again, and part what it pushed in
     order = sorted(poses, key=lambda i: (_lowest(shapes[i], poses[i]), i))
     poses = _push_apart(
-        _settle(poses, shapes, order), shapes, {i: p.pixels for i, p in parts.items()}
+        _settle(poses, shapes, order, missing_heights=heights),
+        shapes,
+        {i: p.pixels for i, p in parts.items()},
     )
     poses = _mirrored(observation, meshes, camera, poses, shapes, parts, labels)
     if missing:

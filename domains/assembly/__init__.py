@@ -11,6 +11,7 @@ pillar), from starts of stacked clutter close together, one stack on the goal's 
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -18,7 +19,17 @@ import numpy as np
 
 from domains import _layout
 from domains._layout import Unit
-from domains.assembly.dimensions import ARCH_H, BEAM, BLOCK, CYL_H, L_FOOT, PILLAR
+from domains.assembly.dimensions import (
+    ARCH_H,
+    ARCH_W,
+    BEAM,
+    BLOCK,
+    CYL_H,
+    L_FOOT,
+    PILLAR,
+    ROOF_H,
+    ROOF_W,
+)
 from domains.base import Domain
 from domains.errors import GenerationError
 from domains.generation import retry
@@ -164,8 +175,9 @@ class Assembly(Domain):
         ],
     }
     composed_goals = (
-        "any of the dev goals' main structures under any top, with any second structure or "
-        "none, the parts packed 3–30 mm apart"
+        "structures built level by level from any parts (bridges on the table or on a long "
+        "part, gates, houses, towers up to 270 mm), with a second structure or none, the parts "
+        "packed 3–30 mm apart"
     )
 
     def make_goal(
@@ -203,19 +215,22 @@ class Assembly(Domain):
         return _layout.scatter(rng, units, self.parts, self.placement, clearance=0.04, yaws=yaws)
 
     def compose(self, seed: int) -> tuple[list[dict], list[dict]] | None:
-        """The dev goals' main structures, tops and second structures combined freely (the
-        catalogue pairs them 20 ways) and packed closer than any catalogue goal: a gap drawn
-        in `COMPOSED_GAP`, the units' origins in a `COMPOSED_AREA` box centred in the middle
-        half of the placement region; started as dev starts are."""
+        """A main structure of `task_structure` (bridges, gates, houses and towers built level by
+        level from any parts the task text allows), a second structure or none, the other parts
+        beside, packed closer than any catalogue goal: a gap drawn in `COMPOSED_GAP`, the units'
+        origins in a `COMPOSED_AREA` box centred in the middle half of the placement region;
+        started as dev starts are. Never built on one of the test split's main structures
+        (`contains_test_structure`: those stay held out)."""
         rng = np.random.default_rng(seed)
-        main, top, second = (kinds[int(rng.integers(len(kinds)))] for kinds in COMPOSED_KINDS)
-        members = _main(str(main), top)
-        used = {i for i, _ in members}
-        extra = _second(second) if second else []
-        if any(i in used for i, _ in extra):
+        members = task_structure(rng)
+        if members is None or contains_test_structure(members):
             return None
-        used |= {i for i, _ in extra}
-        units = [_unit(members)] + ([_unit(extra)] if extra else [])
+        used = {i for i, _ in members}
+        units = [_unit(members)]
+        extra = _composed_second(rng, [i for i in MESH if i not in used])
+        if extra:
+            units.append(_unit(extra))
+            used |= {i for i, _ in extra}
         units += [_unit([(i, np.eye(4))]) for i in MESH if i not in used]
         gap = float(rng.uniform(*COMPOSED_GAP))
         (x0, x1), (y0, y1) = self.placement.x, self.placement.y
@@ -387,10 +402,132 @@ TEST_STACKS = (
 TEST_START_CLEARANCE = 0.015  # between start units in the test split [m] (dev: 0.03)
 
 
-# what `Assembly.compose` combines: the dev goals' main structures, tops, second structures
-COMPOSED_KINDS = tuple(tuple(sorted({g[k] for g in GOALS}, key=str)) for k in range(3))
+# -- composed goals: any structure the task text allows ------------------------------------
+
 COMPOSED_GAP = (0.003, 0.03)  # between the composed goal's units [m]
 COMPOSED_AREA = (0.2, 0.3)  # the box (along x, y) the units' origins are drawn in [m]
+COMPOSED_HEIGHT = 0.27  # the tallest composed structure [m] (the arm reaches over it)
+# what may stand centred on a flat top: a part whose footprint the top carries wherever it
+# is centred (pillar, block, cylinder, roof), or a long part across a long top (the beam on
+# the arch or a block along it, the arch on the beam: its legs need the beam's length)
+ON_LONG_TOP = {"beam": ("arch", "block"), "arch": ("beam",)}
+UNDER_SPAN = ("cylinder", "block")  # what may stand between two pillars, under their span
+
+
+def task_structure(rng: np.random.Generator) -> list[tuple[str, np.ndarray]] | None:
+    """Members (id, T_structure_part) of a structure the task text allows, built level by
+    level: a base — two pillars carrying the beam or the arch (a bridge), standing on the
+    table or on the other long part, maybe with a small part between them; or one part on the
+    table, the arch maybe over a block across its opening (a gate) — then up to three parts,
+    each centred on the flat top below (a tower; the roof ends it: a house), no taller than
+    `COMPOSED_HEIGHT`; None when the draw runs out of parts or height. The dev catalogue's
+    main structures are among them; the property tests and the checks draw goals from it."""
+    free = list(MESH)
+    members: list[tuple[str, np.ndarray]] = []
+
+    def take(i: str, x: float, z: float, yaw: float = 0.0) -> None:
+        free.remove(i)
+        members.append((i, _at(x, z, yaw)))
+
+    if rng.random() < 0.5:  # a bridge
+        span = "beam" if rng.random() < 0.5 else "arch"
+        d = PILLARS_FOR_BEAM if span == "beam" else PILLARS_FOR_ARCH
+        z = 0.0
+        if rng.random() < 1 / 3:  # on a plinth: the other long part
+            plinth = "arch" if span == "beam" else "beam"
+            take(plinth, 0.0, 0.0)
+            z = _top(plinth)
+            d = min(d, PILLARS_ON_ARCH) if plinth == "arch" else d
+        take("pillar_1", -d, z)
+        take("pillar_2", d, z)
+        if rng.random() < 1 / 3:
+            under = str(rng.choice(UNDER_SPAN))
+            take(under, 0.0, z, np.pi / 2 if under == "block" else 0.0)
+        take(span, 0.0, z + PILLAR[2])
+        z, top = z + PILLAR[2] + _top(span), span
+    else:  # one part on the table
+        base = str(rng.choice(["arch", "beam", "pillar_1", "block", "cylinder"]))
+        if base == "arch" and rng.random() < 1 / 3:  # a block across the opening, under it
+            take("block", 0.0, 0.0, np.pi / 2)
+        take(base, 0.0, 0.0)
+        z, top = _top(base), base
+    for _ in range(int(rng.integers(0, 4))):
+        fits = [
+            i
+            for i in free
+            if MESH[i] in ("pillar", "block", "cylinder", "roof")
+            or MESH[top] in ON_LONG_TOP.get(MESH[i], ())
+        ]
+        if not fits:
+            break
+        i = fits[int(rng.integers(len(fits)))]
+        high = ROOF_H if MESH[i] == "roof" else _top(i)
+        if z + high > COMPOSED_HEIGHT:
+            break
+        turned = MESH[i] == "block" and (MESH[top] not in ("beam", "arch") or rng.random() < 0.5)
+        take(i, 0.0, z, np.pi / 2 if turned else 0.0)
+        if MESH[i] == "roof":
+            break
+        z, top = z + high, i
+    return members if len(members) > 1 else None
+
+
+def _composed_second(rng: np.random.Generator, free: Sequence[str]) -> list:
+    """A second, smaller structure of the parts left (one of the dev seconds, or a small part
+    on a flat top as starts stack them), or none."""
+    seconds = [_second(k) for k in ("step", "step_block", "column", "post", "lamp")]
+    options = [m for m in seconds if all(i in free for i, _ in m)]
+    options += [_stack_members(pair) for pair in STACKS if all(i in free for i in pair)]
+    if not options or rng.random() < 0.25:
+        return []
+    return options[int(rng.integers(len(options)))]
+
+
+def _extent(i: str, T: np.ndarray) -> tuple[float, float, float, float]:
+    """(x0, x1, z0, z1) of a structure member standing along the structure's x axis (turned
+    0 or 90°); z1 is its flat top where parts rest (the L-block's foot)."""
+    length, depth = {
+        "pillar": PILLAR[:2],
+        "beam": BEAM[:2],
+        "arch": (ARCH_W, BEAM[1]),
+        "roof": (ROOF_W, BEAM[1]),
+        "cylinder": (0.04, 0.04),
+        "lblock": (L_FOOT[0], BEAM[1]),
+        "block": BLOCK[:2],
+    }[MESH[i]]
+    along = depth if abs(T[1, 0]) > 0.7 else length
+    high = {"roof": ROOF_H, "lblock": L_FOOT[1]}.get(MESH[i]) or _top(i)
+    x, z = float(T[0, 3]), float(T[2, 3])
+    return x - along / 2, x + along / 2, z, z + high
+
+
+def structure_key(members: Sequence[tuple[str, np.ndarray]]) -> Counter:
+    """The labelled relations of a structure's members (along its x axis): ("on", upper mesh,
+    lower mesh) for a part resting on another, ("over", …) for one above another it does not
+    rest on, ("in", …) for one standing within another's length and height (a block in the
+    arch's opening). One structure contains another when its key does (a multiset)."""
+    key: Counter = Counter()
+    ext = {i: _extent(i, T) for i, T in members}
+    for a, (ax0, ax1, az0, az1) in ext.items():
+        for b, (bx0, bx1, bz0, bz1) in ext.items():
+            if a == b or min(ax1, bx1) - max(ax0, bx0) < 1e-3:
+                continue
+            if abs(az0 - bz1) < 1e-3:
+                key["on", MESH[a], MESH[b]] += 1
+            elif az0 > bz1:
+                key["over", MESH[a], MESH[b]] += 1
+            elif bx0 <= ax0 and ax1 <= bx1 and bz0 <= az0 and az1 < bz1 and MESH[b] == "arch":
+                key["in", MESH[a], MESH[b]] += 1
+    return key
+
+
+def contains_test_structure(members: Sequence[tuple[str, np.ndarray]]) -> bool:
+    """Whether a structure contains one of the test split's main structures (its
+    `structure_key` holds the test structure's, without its top)."""
+    key = structure_key(members)
+    return any(
+        not (structure_key(_test_main(kind, None)) - key) for kind in {g[0] for g in TEST_GOALS}
+    )
 
 
 # Start stacks (base, top): small parts left on a flat top.
@@ -410,6 +547,10 @@ STACKS = (
 def _stack(ids: Sequence[str]) -> Unit:
     """Parts stacked bottom to top, each centred on the flat top below (on the L-block's
     foot, the block across it as in `step_block`)."""
+    return _unit(_stack_members(ids))
+
+
+def _stack_members(ids: Sequence[str]) -> list[tuple[str, np.ndarray]]:
     members, z, x = [], 0.0, 0.0
     for k, i in enumerate(ids):
         below = ids[k - 1] if k else None
@@ -419,7 +560,7 @@ def _stack(ids: Sequence[str]) -> Unit:
             z += _top(below)
         yaw = np.pi / 2 if (MESH[i], below and MESH[below]) == ("block", "lblock") else 0.0
         members.append((i, _at(x, z, yaw)))
-    return _unit(members)
+    return members
 
 
 def _unit(members: Sequence[tuple[str, np.ndarray]]) -> Unit:

@@ -78,3 +78,52 @@ def test_composed_cubes_goals_are_never_a_test_family():
     ]
     assert test_shaped  # the draw does produce them ...
     assert all(cubes.compose(s) is None for s in test_shaped)  # ... and compose drops them
+
+
+def test_composed_assembly_goals_stand_and_are_never_built_on_a_test_structure():
+    """`Assembly.compose`: structures the task text allows beyond the dev catalogue's (pillars
+    standing on a part, a part between pillars, towers of three parts and more), valid scenes,
+    and none of them contains a test split's main structure: its support graph holds none
+    (`networkx` subgraph monomorphism on the reference relations, mesh by mesh — another
+    reading than the composer's own `structure_key`)."""
+    import networkx as nx
+    import numpy as np
+
+    from domains.assembly import MESH, TEST_GOALS, _test_main, task_structure
+    from domains.generation import geometric_problems
+
+    assembly = domains.load("assembly")
+
+    def support(members) -> nx.DiGraph:
+        recs = [{"id": i, "mesh": MESH[i], "pose": T} for i, T in members]
+        g = nx.DiGraph()
+        g.add_nodes_from((i, {"mesh": MESH[i]}) for i, _ in members)
+        for e in assembly.reference_relations(recs)["edges"]:
+            if e["type"] == "on":
+                g.add_edge(e["source"], e["target"])
+        return g
+
+    def holds(big: nx.DiGraph, small: nx.DiGraph) -> bool:
+        match = nx.algorithms.isomorphism.DiGraphMatcher(
+            big, small, node_match=lambda a, b: a["mesh"] == b["mesh"]
+        )
+        return match.subgraph_is_monomorphic()
+
+    tests = [support(_test_main(k, None)) for k in {g[0] for g in TEST_GOALS}]
+    drawn = [(s, m) for s in range(1, 301) if (m := task_structure(np.random.default_rng(s)))]
+    kept = [(s, m) for s, m in drawn if assembly.compose(s) is not None]
+    assert len(kept) >= 150
+    on_a_part = 0
+    for s, members in kept:
+        graph = support(members)
+        for t in tests:
+            # a test structure with two supporters under one part (tiered, portal-based ones)
+            # or a chain of three is what the test split holds out
+            if t.number_of_edges() >= 3:
+                assert not holds(graph, t), s
+        on_a_part += any(MESH[a] == "pillar" and MESH[b] != "pillar" for a, b in graph.edges)
+    assert on_a_part >= 10  # pillars standing on another part, which the dev goals never do
+    for s, _ in kept[:10]:
+        start, goal = assembly.compose(s)
+        assert geometric_problems(assembly, assembly.scene(goal)) == [], s
+        assert geometric_problems(assembly, assembly.scene(start)) == [], s
