@@ -1,16 +1,17 @@
-"""The cubes plan on compositions the task text allows, not only the catalogue's.
+"""A domain's plan on compositions the task text allows, not only the catalogue's.
 
-The task text promises "stacks, towers, pyramids and rows" of six 40 mm cubes; the dev
-catalogue lists 19 compositions of them and the test split its own families. This draws any
-such structure (`domains.cubes.task_structure`), scatters and starts it as dev draws are, and
-asks of a `plan` what the robot asks: every step leaves the fingers room at the pick and at the
-place (the executor's hand model; the arm's reach is not tested). A draw counts as feasible
-when the generator's own robot planner finds an order.
+The cubes task text promises "stacks, towers, pyramids and rows" of six 40 mm cubes, the
+assembly one bridges, gates, houses and towers; the dev catalogues list some of them and the
+test splits their own. This draws any such goal (`Domain.compose`: `domains.cubes.
+task_structure`, `domains.assembly.task_structure`, the tangram's composed figures), started as
+dev draws are, and asks of a `plan` what the robot asks: every step leaves the fingers room at
+the pick and at the place (the executor's hand model; the arm's reach is not tested). A draw
+counts as feasible when the generator's own robot planner finds an order.
 
 Usage:
-    python -m benchmarks.compositions_bench [--plan PATH] [--seed 50000] [--draws 200]
-        [--out DIR]
-Writes DIR/bench_compositions.json (one row per draw) and prints the totals.
+    python -m benchmarks.compositions_bench [--domain cubes] [--plan PATH] [--seed 50000]
+        [--draws 200] [--out DIR]
+Writes DIR/bench_compositions_DOMAIN.json (one row per draw) and prints the totals.
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ import numpy as np
 import domains
 from domains.errors import GenerationError
 
-DEFAULT_PLAN = Path(domains.__file__).parent / "cubes" / "programs" / "plan.py"
 
 
 def draw(domain: Any, seed: int) -> tuple[list[dict], list[dict], bool] | None:
@@ -78,12 +78,14 @@ def verdict(domain: Any, plan: Callable[..., dict], start: list, goal: list) -> 
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--plan", type=Path, default=DEFAULT_PLAN)
+    ap.add_argument("--domain", default="cubes", choices=domains.names())
+    ap.add_argument("--plan", type=Path, help="default: domains/DOMAIN/programs/plan.py")
     ap.add_argument("--seed", type=int, default=50000)
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--out", type=Path, default=Path("runs/bench"))
     args = ap.parse_args(argv)
-    domain = domains.load("cubes")
+    domain = domains.load(args.domain)
+    args.plan = args.plan or domain.root / "programs" / "plan.py"
     plan = load_plan(args.plan)
     rows, t0 = [], time.perf_counter()
     for seed in range(args.seed, args.seed + args.draws):
@@ -105,7 +107,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "seconds": round(time.perf_counter() - t0, 1),
     }
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "bench_compositions.json").write_text(
+    (args.out / f"bench_compositions_{args.domain}.json").write_text(
         json.dumps({"totals": totals, "rows": rows}, indent=1)
     )
     print(json.dumps(totals))

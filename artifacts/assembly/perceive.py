@@ -565,7 +565,7 @@ def _settle(poses, shapes, order, moves=None, missing_heights=()):
         drop, on = _lowest(shapes[i], T), "table"
         for j, U in placed.items():
             gap, axis = separation(shapes[i], T, shapes[j], U, cutoff=SETTLE_RANGE)
-            if axis[2] >= 0.7 and -SETTLE_RANGE <= gap < drop:
+            if axis[2] >= 0.7 and -SETTLE_RANGE <= gap < drop and _lands(shapes, i, T, j, U, gap):
                 drop, on = gap, j
         held = drop > SETTLE_TOL and any(abs(drop - h) < 0.006 for h in missing_heights)
         if (abs(drop) <= SETTLE_RANGE or drop < 0) and not held:
@@ -576,6 +576,15 @@ def _settle(poses, shapes, order, moves=None, missing_heights=()):
         if moves is not None:
             moves[i] = (-drop, on)
     return placed
+
+
+def _lands(shapes, i, T, j, U, gap):
+    """Whether part i, moved down by `gap`, rests on part j's top (a part beside j, its bottom
+    edge diagonally above j's top edge, would slide down j's side)."""
+    D = T.copy()
+    D[2, 3] -= gap
+    after, axis = separation(shapes[i], D, shapes[j], U, cutoff=0.001)
+    return after > -0.001 and axis[2] >= 0.7
 
 
 def _push_apart(poses, shapes, pixels):

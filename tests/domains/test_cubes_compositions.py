@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import domains
-from benchmarks.compositions_bench import DEFAULT_PLAN, draw, load_plan, verdict
+from benchmarks.compositions_bench import draw, load_plan, verdict
 from domains.cubes import task_structure
 
 
@@ -29,7 +29,7 @@ def cubes():
 
 @pytest.fixture(scope="module")
 def reference_plan():
-    return load_plan(DEFAULT_PLAN)
+    return load_plan(domains.load("cubes").root / "programs" / "plan.py")
 
 
 def test_task_structures_are_grid_structures_of_six():

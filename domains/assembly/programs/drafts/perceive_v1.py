@@ -3,9 +3,12 @@
 # eight headings and three offsets along its length all start from what it shows. A beam
 # under a roof shows only its two ends and a sliver of one side; from those ICP settles on a
 # beam lying across the structure, and nothing makes it look where the roof above it points.
-# `rivet check assembly perceive domains/assembly/programs/drafts/perceive_v1.py --deps
-# domains/assembly/programs` fails `property.accuracy` (seed15/goal/view1: the beam 74 mm off,
-# turned 90°, its 'on' relation to a pillar lost) and `image.perceive_rerender`.
+# Where a part is hidden it asks the toolbox's physics about records whose mesh ('pillar') its
+# shapes are not keyed by, and raises. In the reference transcript it fails `schema.output`
+# (that error, on a composed scene), `property.accuracy` and `domain.assembly.physically_valid`
+# (a roof whose centre of mass lies 45 mm outside its support); `rivet check assembly perceive
+# domains/assembly/programs/drafts/perceive_v1.py --deps domains/assembly/programs` shows its
+# failures on fresh cases.
 """perceive(observation, meshes, camera) -> records: the 6D poses of the parts in one RGB-D image.
 
 1. Colour: every part has its own hue; pixels are labelled by the nearest catalogue hue
