@@ -31,7 +31,6 @@ import domains
 from domains.errors import GenerationError
 
 
-
 def draw(domain: Any, seed: int) -> tuple[list[dict], list[dict], bool] | None:
     """(start, goal, feasible) of a task-text composition (`Domain.compose`), or None when
     `seed` gives no scene."""
