@@ -297,6 +297,8 @@ def accuracy(
 
     `renders` (the re-renders `image.perceive_rerender` judges) and `out_dir` give the failing
     observation's per-object rows and picture."""
+    from sim.score import state_accuracy
+
     t0 = time.perf_counter()
     tol = domain.tolerance
     r = CheckResult(
@@ -320,11 +322,26 @@ def accuracy(
     errors: list[float] = []
     wrong_cases: list[str] = []
     for case in scored:
-        score, untold = reading_score(domain, ctx.spec.meshes, case, perceived_out[case["name"]])
+        got_all = perceived_out[case["name"]]
+        # once a failing case is shown, the others count only as wrong or right: their
+        # scoring may stop at the first object the image does tell (`untellable(every=False)`)
+        score, untold = reading_score(
+            domain, ctx.spec.meshes, case, got_all, every=r.status == "passed"
+        )
+        # the error of every object the case scores, excused or not (the same however far
+        # `untellable` looked)
+        left_out = set(case.get("unscored", ()))
+        errors += [
+            o.translation
+            for o in state_accuracy(
+                domain,
+                [o for o in got_all if o["id"] not in left_out],
+                [o for o in case["truth"] if o["id"] not in left_out],
+            ).objects
+        ]
         if untold:  # shown like an object nothing shows: reported, its pose not scored
             case = {**case, "unscored": sorted({*case.get("unscored", ()), *untold})}
-        recs = [o for o in perceived_out[case["name"]] if o["id"] not in case.get("unscored", ())]
-        errors += [o.translation for o in score.objects]
+        recs = [o for o in got_all if o["id"] not in case.get("unscored", ())]
         if score.correct:
             continue
         wrong_cases.append(case["name"])
@@ -396,18 +413,22 @@ TELL_PX = 20  # [px] at the image check's resolution: fewer pixels changed canno
 TELL_DEPTH = 0.004  # [m] a depth change that counts as a changed pixel
 
 
-def reading_score(domain: Any, meshes: Mapping, case: dict, records: list[dict]) -> tuple:
+def reading_score(
+    domain: Any, meshes: Mapping, case: dict, records: list[dict], *, every: bool = True
+) -> tuple:
     """(`sim.score.state_accuracy` of `records` on observation `case`, the ids left out of it
     because the image cannot tell their poses (`untellable`)) — how `property.accuracy` scores
     one reading. Objects the case leaves unscored (nothing shows them, they hold nothing up)
-    are reported (`property.ids_match_catalogue`), never placed."""
+    are reported (`property.ids_match_catalogue`), never placed. `every=False`: stop at the
+    first object the image does tell (the reading is wrong then, whatever the others are);
+    the ids left out are those found before it."""
     from sim.score import state_accuracy
 
     left_out = set(case.get("unscored", ()))
     recs = [o for o in records if o["id"] not in left_out]
     truth = [o for o in case["truth"] if o["id"] not in left_out]
     score = state_accuracy(domain, recs, truth)
-    untold = untellable(domain, meshes, case, recs, score)
+    untold = untellable(domain, meshes, case, recs, score, every=every)
     if untold:
         recs = [o for o in recs if o["id"] not in untold]
         truth = [o for o in truth if o["id"] not in untold]
@@ -415,7 +436,9 @@ def reading_score(domain: Any, meshes: Mapping, case: dict, records: list[dict])
     return score, untold
 
 
-def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score: Any) -> set:
+def untellable(
+    domain: Any, meshes: Mapping, case: dict, recs: list[dict], score: Any, *, every: bool = True
+) -> set:
     """The objects `score` finds off whose pose the observation cannot tell from the true one:
     the true scene drawn with that one object where `recs` put it differs from the true
     scene's drawing in fewer than `TELL_PX` pixels at the image check's resolution (the
@@ -423,7 +446,8 @@ def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score
     (so it holds up what it holds up). An object the true drawing shows nowhere that holds
     nothing up, there or where `recs` put it, keeps only the others' relations: what it rests
     on or stands beside is where it stands, which the image cannot say (the rule text). Only
-    for a reading with every object reported once."""
+    for a reading with every object reported once. `every=False`: return at the first object
+    the image tells (each costs a drawing)."""
     from toolbox import render_scene
 
     if score.correct or score.missing or score.extra or "reference_camera" not in case:
@@ -439,15 +463,18 @@ def untellable(domain: Any, meshes: Mapping, case: dict, recs: list[dict], score
         moved = [dict(o, pose=got[o["id"]]["pose"]) if o["id"] == e.id else o for o in truth]
         base = base or render_scene(truth, meshes, camera)
         unseen = not (base["mask"] == [o["id"] for o in truth].index(e.id)).any()
-        if not _relations_kept(domain, moved, truth, e.id if unseen else None):
-            continue
-        drawn = render_scene(moved, meshes, camera)
-        both = (base["mask"] >= 0) & (drawn["mask"] >= 0)
-        changed = (base["mask"] != drawn["mask"]) | (
-            both & (np.abs(base["depth"] - drawn["depth"]) > TELL_DEPTH)
-        )
-        if int(changed.sum()) < TELL_PX:
+        told = not _relations_kept(domain, moved, truth, e.id if unseen else None)
+        if not told:
+            drawn = render_scene(moved, meshes, camera)
+            both = (base["mask"] >= 0) & (drawn["mask"] >= 0)
+            changed = (base["mask"] != drawn["mask"]) | (
+                both & (np.abs(base["depth"] - drawn["depth"]) > TELL_DEPTH)
+            )
+            told = int(changed.sum()) >= TELL_PX
+        if not told:
             out.add(e.id)
+        elif not every:
+            break
     return out
 
 

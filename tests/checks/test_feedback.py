@@ -307,6 +307,29 @@ def test_a_pose_the_image_cannot_tell_from_the_truth_is_not_scored(tmp_path):
 
 
 @pytest.mark.slow
+def test_scoring_a_reading_may_stop_at_the_first_object_the_image_tells():
+    """`reading_score(every=False)`, what `property.accuracy` uses once it has shown a failing
+    case: a reading with red 11 mm to the side (the image tells) and yellow 15 mm farther back
+    behind the tower (it cannot) is wrong either way; the full score excuses yellow, the quick
+    one stops at red and draws nothing for yellow."""
+    from checks.inputs import observation_case
+    from checks.suites.perceive import reading_score
+
+    dom = domains.load("cubes")
+    case = observation_case(
+        dom, "obs01/behind", cube_behind_tower(dom), dom.camera("front"), "front", 1
+    )
+    records = [dict(o, pose=np.array(o["pose"], float)) for o in case["truth"]]
+    for o in records:
+        o["pose"][:2, 3] += {"red": (0, 0.011), "yellow": (-0.015, 0)}.get(o["id"], (0, 0))
+    meshes = DomainSpec.of(dom).meshes
+    full, untold = reading_score(dom, meshes, case, records)
+    quick, untold_quick = reading_score(dom, meshes, case, records, every=False)
+    assert untold == {"yellow"} and untold_quick == set()
+    assert not full.correct and not quick.correct
+
+
+@pytest.mark.slow
 def test_where_a_part_nothing_shows_rests_is_not_scored(tmp_path):
     """A cube nothing shows that holds nothing up (yellow, on a cube hidden behind a tower of
     four) may be read resting anywhere out of sight, on the table behind the others, although
