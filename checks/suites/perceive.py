@@ -329,16 +329,16 @@ def accuracy(
             domain, ctx.spec.meshes, case, got_all, every=r.status == "passed"
         )
         # the error of every object the case scores, excused or not (the same however far
-        # `untellable` looked)
+        # `untellable` looked): `score` itself where nothing was excused
         left_out = set(case.get("unscored", ()))
-        errors += [
-            o.translation
-            for o in state_accuracy(
+        every_scored = score
+        if untold:
+            every_scored = state_accuracy(
                 domain,
                 [o for o in got_all if o["id"] not in left_out],
                 [o for o in case["truth"] if o["id"] not in left_out],
-            ).objects
-        ]
+            )
+        errors += [o.translation for o in every_scored.objects]
         if untold:  # shown like an object nothing shows: reported, its pose not scored
             case = {**case, "unscored": sorted({*case.get("unscored", ()), *untold})}
         recs = [o for o in got_all if o["id"] not in case.get("unscored", ())]
