@@ -42,6 +42,12 @@ class ExecutorConfig:
     release_settle: float = 0.15  # pause before and after opening [s]
     release_height: float = 0.001  # the object is let go this far above its target [m]
     in_hand_correction: bool = True  # correct the place for the in-hand estimate, when there is one
+    # estimate the camera's calibration offset from the wrist camera's readings of objects
+    # about to be grasped, and act on the belief shifted by it (see `sim.executor`); readings
+    # farther than `camera_offset_max` from the belief are that object misperceived, not the
+    # camera, and are left out
+    camera_offset: bool = True
+    camera_offset_max: float = 0.012  # [m]
     measure_settle: float = 0.2  # pause before reading the object's pose in the hand [s]
     near_settle: float = 0.15  # the same, at the end of the descent onto the target [s]
     park_after: bool = True
@@ -102,6 +108,9 @@ class StepOutcome:
         grasp: the chosen grasp (None before one was chosen).
         phases: (phase, simulated time at its start [s]) in order, for video annotation.
         weld_engaged: whether the weld assist was active at some point of the step.
+        camera_offset: the executor's estimate of the camera's calibration offset (x, y) [m]
+            after this step (what it subtracted from the belief and the targets), None when
+            it has no reading yet.
     """
 
     index: int
@@ -115,6 +124,7 @@ class StepOutcome:
     phases: tuple[tuple[str, float], ...] = ()
     sim_time: float = 0.0
     weld_engaged: bool = False
+    camera_offset: tuple[float, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -129,6 +139,7 @@ class StepOutcome:
             "phases": [list(p) for p in self.phases],
             "sim_time": self.sim_time,
             "weld_engaged": self.weld_engaged,
+            "camera_offset": None if self.camera_offset is None else list(self.camera_offset),
         }
 
 

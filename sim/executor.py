@@ -10,6 +10,17 @@ default) or an explicit ground-truth object tracker (`ExecutorConfig.track_objec
 default: the oracle-sensing protocol). It commands the robot's actuators and never writes an
 object's state (objects are never teleported).
 
+The belief is in the frame of the camera that perceived it, and a camera's calibration is off
+by a few millimetres (`sim.realism`): every perceived pose, start and goal alike, is shifted by
+about the same offset, which no program can see in the image. The robot can: with the jaws
+open around an object it is about to grasp, the wrist camera reads where the object is in the
+hand, so where it is on the table (the arm's own kinematics), and the difference from the
+belief is a reading of that offset (`ExecutorConfig.camera_offset`). The executor keeps the
+median of its readings and acts on the belief and the targets shifted by it, so a figure is
+built where the goal image showed it, not a calibration error away. Only objects whose belief
+came from perception give readings (not one the robot itself put down), and a reading farther
+from the belief than `camera_offset_max` is that object misperceived, not the camera.
+
 Each transfer is grasp selection → approach above → descend → close → lift → transfer at a
 safe height → descend → open → retreat, planned kinematically first (so an unreachable step
 fails before the arm moves) and then run in physics with joint position control at
@@ -135,6 +146,8 @@ class Executor:
         self._servo_lag = -model.actuator_biasprm[acts, 2] / model.actuator_gainprm[acts, 0]
         self._grip_cmd = float(data.ctrl[self.index.gripper_actuator])
         self._tracker = _Tracker()
+        self._readings: list[np.ndarray] = []  # camera offset readings (x, y) [m]
+        self._placed: dict[str, np.ndarray] = {}  # object → the target it was put at (belief)
         self._next_frame = data.time
         self._frames = 0
         self._deadline: float | None = None
@@ -243,7 +256,7 @@ class Executor:
                 raise _StepAbort(
                     "not_perceived", "grasp", f"the robot has no pose of {oid!r} (not perceived)"
                 )
-            T_pick = self.belief[oid]
+            T_pick = self._robot_frame(self.belief[oid])
             try:
                 chosen = self.transfers.choose(
                     self._q_cmd,
@@ -251,14 +264,17 @@ class Executor:
                     self.meshes[oid],
                     self.symmetries[oid],
                     T_pick,
-                    target,
-                    obstacles(self.belief, self.meshes, oid),
+                    self._robot_frame(target),
+                    obstacles(
+                        {k: self._robot_frame(T) for k, T in self.belief.items()}, self.meshes, oid
+                    ),
                 )
             except TransferAbort as abort:
                 raise _StepAbort(abort.kind, abort.phase, abort.reason, abort.grasp) from None  # type: ignore[arg-type]
             grasp, transfer_z = chosen.grasp, chosen.transfer_z
             approach, close, lift = split_at(chosen.pick, CLOSING, LIFTING)
             self._run_phase("approach", approach)
+            self._read_offset(oid)
             self._mark("close")
             if weld is not None:
                 weld.hold(oid)
@@ -267,7 +283,7 @@ class Executor:
             self._run_phase("lift", lift)
             self._check_hold(grasp, "lift")
             self._settle(self.config.measure_settle)
-            T_place = target @ self.symmetries[oid][grasp.symmetry]
+            T_place = self._robot_frame(target) @ self.symmetries[oid][grasp.symmetry]
             place = self._place(
                 grasp,
                 T_place,
@@ -322,7 +338,10 @@ class Executor:
                 sim_time=self.data.time - t0,
             )
         self.belief[oid] = target  # what the robot now believes: where it put the object
-        pos, rot, yaw = self.sensors.meter.errors(oid, target, self.symmetries[oid])
+        self._placed[oid] = target
+        pos, rot, yaw = self.sensors.meter.errors(
+            oid, self._robot_frame(target), self.symmetries[oid]
+        )  # against where the robot aimed
         self._mark("done")
         return StepOutcome(
             index=i,
@@ -335,7 +354,49 @@ class Executor:
             phases=tuple(self._tracker.phases),
             sim_time=self.data.time - t0,
             weld_engaged=weld is not None and weld.engaged,
+            camera_offset=self.camera_offset,
         )
+
+    # -- the camera's calibration offset (see the module doc) ---------------------------------
+
+    @property
+    def camera_offset(self) -> tuple[float, float] | None:
+        """The estimated offset (x, y) [m] of perceived poses from the robot's frame: the
+        median of the readings so far, None before the first."""
+        if not self._readings:
+            return None
+        x, y = np.median(np.asarray(self._readings), axis=0)
+        return float(x), float(y)
+
+    def _robot_frame(self, T: np.ndarray) -> np.ndarray:
+        """A perceived pose (the belief's, a plan target's) where the robot will find it."""
+        offset = self.camera_offset
+        if offset is None:
+            return T
+        out = np.array(T, dtype=float)
+        out[:2, 3] -= offset
+        return out
+
+    def _read_offset(self, oid: str) -> None:
+        """With the jaws open around `oid`, read where it is (wrist camera and the arm's
+        joints) against where the belief puts it."""
+        sensor = self.sensors.in_hand
+        if sensor is None or not self.config.camera_offset or self.config.track_objects:
+            return
+        placed = self._placed.get(oid)
+        if placed is not None and np.array_equal(placed, self.belief[oid]):
+            return  # where the robot put it: nothing about the camera
+        rel = sensor.estimate(oid)
+        if rel is None:
+            return
+        T_tcp = self.ik.fk(self.data.qpos[self.index.arm_qpos])
+        # the mesh's centroid: the same point in every frame a symmetric object may be read in
+        c = np.append(np.asarray(self.meshes[oid].centroid, dtype=float), 1.0)
+        seen = (T_tcp @ rel @ c)[:2]
+        believed = (self.belief[oid] @ c)[:2]
+        reading = believed - seen
+        if float(np.linalg.norm(reading)) <= self.config.camera_offset_max:
+            self._readings.append(reading)
 
     def _check_hold(self, grasp: Grasp, phase: Phase, *, dropped: bool = False) -> None:
         """Fail the step when the gripper's own signals say nothing is held: the jaws closed

@@ -8,9 +8,10 @@ is allowed only here, each use named for what it stands for:
 - `GripperSensor`: the 2F-85's own signals — how far the jaws are open (the fingers'
   kinematics, as the gripper reports its position) and whether each pad touches something
   (a pad contact sensor; it does not say *what* it touches). Failure detection uses these.
-- `InHandSensor`: an estimate of the held object's pose in the hand, standing in for a wrist
-  camera (the paper's ZED M): the true relative pose plus seeded Gaussian noise. Off, the
-  executor is open loop after the grasp.
+- `InHandSensor`: an estimate of the pose in the hand of the object held, or of the one between
+  the open jaws just before they close, standing in for a wrist camera (the paper's ZED M):
+  the true relative pose plus seeded Gaussian noise. Off, the executor is open loop after the
+  grasp and takes the perceiving camera's calibration as exact.
 - `ObjectTracker`: ground-truth object poses before each pick — a sensor no real robot has,
   switched on only explicitly (the oracle-sensing protocol, to show what perception costs).
 - `PlacementMeter`: the placement error after each release, for scoring only (the executor

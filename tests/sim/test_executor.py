@@ -501,6 +501,43 @@ def test_a_grasp_goes_where_the_robot_believes_the_object_is(track):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("estimate", [False, True], ids=["as-believed", "offset-estimated"])
+def test_a_camera_offset_read_at_the_first_grasp_is_taken_off_every_target(estimate):
+    # the camera that perceived the start and the goal is 5 mm off: the belief and the plan's
+    # targets are shifted alike. With the jaws open around the first cube the wrist camera
+    # shows where it is; the executor takes that offset off both targets
+    shift = np.array([0.004, -0.003, 0.0])
+    cubes = {"a": (0.5, 0.0, 0.0), "b": (0.42, 0.18, 0.4)}
+    ex = _executor(cubes, config=ExecutorConfig(camera_offset=estimate))
+    ex.belief = {k: se3.make(t=shift) @ T for k, T in ex.belief.items()}
+    goals = {"a": _at(0.58, -0.15, yaw=0.6), "b": _at(0.5, 0.1)}
+    result = ex.execute(
+        [{"object": k, "target_pose": se3.make(t=shift) @ T} for k, T in goals.items()]
+    )
+    assert result.ok, result.failure
+    off = {k: float(np.linalg.norm(truth(ex, k)[:2, 3] - T[:2, 3])) for k, T in goals.items()}
+    if estimate:
+        assert ex.camera_offset == pytest.approx(shift[:2], abs=1e-3)
+        assert max(off.values()) < 0.0015, off
+        assert [s.camera_offset is not None for s in result.steps] == [True, True]
+        # what the robot believes stays in the camera's frame: where the plan said
+        assert np.allclose(ex.belief["a"], se3.make(t=shift) @ goals["a"])
+    else:
+        assert ex.camera_offset is None
+        assert min(off.values()) > 0.004, off
+
+
+def test_a_reading_far_from_the_belief_is_the_object_misperceived_not_the_camera():
+    ex = _executor({"a": (0.5, 0.0, 0.0)})
+    ex.belief = {"a": _at(0.5, 0.02)}
+    ex._read_offset("a")
+    assert ex.camera_offset is None
+    ex.belief = {"a": _at(0.5, 0.004)}
+    ex._read_offset("a")
+    assert ex.camera_offset == pytest.approx((0.0, 0.004), abs=1e-5)
+
+
+@pytest.mark.slow
 def test_after_a_placement_the_belief_is_the_plan_target_not_the_outcome():
     # with the tracker off the executor's belief of a moved object is where it put it: the
     # target (what the robot commanded), whatever the physics did with it
