@@ -188,6 +188,10 @@ class TrialResult:
     object_errors: list[dict]
     execution_failure: dict | None = None  # the executor's own failure (step, kind, phase, reason)
     plan_failure: str | None = None  # why the plan failed its abstract check, when it did
+    # when the plan fails its abstract check against the true scenes: whether it still ends
+    # every object at its perceived goal pose, from the perceived start (the shortfall is
+    # then perception's, not the plan's)
+    plan_builds_perceived: bool | None = None
     loop: dict | None = None  # the closed loop's record (`sim.loop.ClosedLoop.to_dict`)
     fault: dict | None = None  # the injected fault and what it did (`sim.faults.Fault`)
     fit: dict | None = None  # the policy's fit of each perceived state (`artifacts.fit`)
@@ -206,6 +210,11 @@ class TrialResult:
             "object_errors": self.object_errors,
             "execution_failure": self.execution_failure,
             "plan_failure": self.plan_failure,
+            **(
+                {"plan_builds_perceived": self.plan_builds_perceived}
+                if self.plan_builds_perceived is not None
+                else {}
+            ),
             **({"loop": self.loop} if self.loop is not None else {}),
             **({"fault": self.fault} if self.fault is not None else {}),
             **({"fit": self.fit} if self.fit is not None else {}),
@@ -355,6 +364,7 @@ def run_trial(
     # -- plan success (abstract, physics-free: geometry.apply_plan, as the plan checks) -------
     plan_ok = False
     plan_failure: str | None = None
+    builds_perceived: bool | None = None
     steps: list[dict] = []
     valid = False
     if too_long := plan_problem(out.plan):  # before any work on it: listing it costs too
@@ -385,6 +395,8 @@ def run_trial(
                 first.problem if first.object is None else f"{first.object}: {first.problem}"
             )
             failure = failure or ("planning", plan_failure)
+            if out.start_state is not None:
+                builds_perceived = ends_at(domain, out.start_state, steps, out.goal_state)
 
     # -- execution in physics ---------------------------------------------------------------
     final_ok = False
@@ -548,6 +560,7 @@ def run_trial(
         object_errors=object_errors,
         execution_failure=execution_failure,
         plan_failure=plan_failure,
+        plan_builds_perceived=builds_perceived,
         loop=loop_record,
         fault=None if fault is None else fault.to_dict(),
         fit=out.fit,
@@ -674,6 +687,27 @@ class _ClosedTrial:
         if loop.status == "done":
             last_failure = None
         return outcomes, last_failure, loop.to_dict()
+
+
+def ends_at(domain: Domain, start: Any, steps: Sequence[Mapping], goal: Any) -> bool:
+    """Whether `steps` leave every object of `goal` at its pose there (the domain's
+    tolerance, modulo symmetry), each object starting where `start` has it: the end of a plan,
+    judged on the states it was made from."""
+    poses = {str(r["id"]): se3.as_matrix(r["pose"]) for r in records_of(start)}
+    for step in steps:
+        poses[str(step["object"])] = se3.as_matrix(step["target_pose"])
+    tol = domain.tolerance
+    for r in records_of(goal):
+        T = poses.get(str(r["id"]))
+        if T is None or not se3.within_tolerance(
+            T,
+            se3.as_matrix(r["pose"]),
+            trans_tol=tol.translation,
+            rot_tol=tol.rotation,
+            symmetries=list(domain.symmetries(r["mesh"])),
+        ):
+            return False
+    return True
 
 
 def _states_problem(domain: Domain, out: PolicyOutput) -> tuple[Stage, str] | None:

@@ -136,3 +136,33 @@ def test_a_misreading_the_image_cannot_tell_is_held_against_no_program():
     text = GateResult(domain="cubes", seed=1, trials=[row], duration_s=1.0).markdown()
     assert "passed." in text and "- unseen trial01/generated" in text
     assert "the image cannot tell: goal: yellow; held against no program" in text
+
+
+def test_a_plan_that_builds_the_perceived_goal_is_not_held_against_plan():
+    """The plan check in a trial is against the true scenes; a plan that ends every object at
+    its perceived goal pose misses them only by what perception was off (within the state
+    tolerance: a camera's calibration shifts every perceived pose alike)."""
+    import numpy as np
+
+    import domains
+    from artifacts.gate import _blame
+    from sim.trials import ends_at
+
+    dom = domains.load("tangram")
+    inst = dom.benchmark("dev")[0]
+    shift = np.eye(4)
+    shift[0, 3] = 0.004  # what a calibration error moves the table by
+    seen_start = [dict(o, pose=shift @ np.asarray(o["pose"])) for o in inst.start["objects"]]
+    seen_goal = [dict(o, pose=shift @ np.asarray(o["pose"])) for o in inst.goal["objects"]]
+    steps = [{"object": o["id"], "target_pose": o["pose"]} for o in seen_goal]
+    assert ends_at(dom, {"objects": seen_start}, steps, {"objects": seen_goal})
+    assert not ends_at(dom, {"objects": seen_start}, steps[1:], {"objects": seen_goal})
+    far = [dict(s, target_pose=shift @ shift @ np.asarray(s["target_pose"])) for s in steps]
+    assert not ends_at(dom, {"objects": seen_start}, far, {"objects": seen_goal})  # 8 mm off
+
+    result = {"state_ok": True, "plan_ok": False, "final_ok": True,
+              "failure": {"stage": "planning", "reason": "the plan does not reach the goal"}}  # fmt: skip
+    assert _blame(result) == "plan"
+    assert _blame({**result, "plan_builds_perceived": False}) == "plan"
+    assert _blame({**result, "plan_builds_perceived": True}) is None
+    assert _blame({**result, "plan_builds_perceived": True, "final_ok": False}) is None

@@ -26,6 +26,11 @@ Pose. The pieces lie flat (z = 0, turned only about the vertical), so each is (x
    the centroid. The starts are the knob centre and a coarse sweep of yaw over the piece's
    symmetry period (triangles 360°, parallelogram 180°, square 90°); the fit is sub-degree
    because the outline's long edges are hundreds of pixels.
+4. Apart. A piece mostly hidden behind its neighbours' knobs shows too little of its outline
+   to fix its turn, and its fit may put it inside a neighbour. Pieces lie side by side, never
+   in each other: where two fitted pieces overlap by more than 1.5 mm, the one the image shows
+   less of is fitted again from every start of the sweep with a fourth residual, how deep its
+   samples lie inside the other pieces, and that fit is kept when it keeps them apart.
 The parallelogram is never mirrored: a mirrored parallelogram does not fit its outline.
 """
 
@@ -77,6 +82,8 @@ INTERIOR_STEP = 0.008  # spacing of interior samples [m]
 YAW_STEP = np.radians(10.0)
 GOOD_FIT = 0.0005**2  # mean squared residual of a clean fit [m²]
 MARGIN = 30  # crop margin around a piece's pixels [px]
+OVERLAP_TOL = 0.0015  # two fitted pieces overlapping deeper than this are refitted apart [m]
+OVERLAP_SLACK = 0.0005  # the overlap a refit tolerates [m]
 
 
 def _hue(rgb):
@@ -325,6 +332,53 @@ class _Piece:
         x, y, yaw = best
         return float(x), float(y), float(yaw % period)
 
+    def refit_apart(self, period, others):
+        """The fit again from every start of the yaw sweep, now also keeping the piece out of
+        `others` (fitted pieces (Shape, x, y, yaw)): pieces lie side by side, never in each
+        other. Returns (x, y, yaw) and its cost with the overlap."""
+        centre = np.median(self.knob, axis=0) if len(self.knob) >= 10 else self.top.mean(axis=0)
+
+        def fun(q):
+            return np.concatenate([self.residuals(q), _overlap(self.shape, q, others)])
+
+        def cost(q):
+            return float(np.mean(np.minimum(fun(q), 0.01) ** 2))
+
+        yaws = np.arange(0.0, period - 1e-9, YAW_STEP)
+        costs = [cost((centre[0], centre[1], a)) for a in yaws]
+        best, best_cost = None, np.inf
+        for k in np.argsort(costs, kind="stable")[:4]:
+            r = least_squares(
+                fun,
+                x0=[centre[0], centre[1], yaws[k]],
+                loss="soft_l1",
+                f_scale=0.001,
+                x_scale=[0.005, 0.005, 0.1],
+                max_nfev=40,
+            )
+            c = cost(r.x)
+            if c < best_cost - 1e-12:
+                best, best_cost = r.x, c
+        x, y, yaw = best
+        return (float(x), float(y), float(yaw % period)), best_cost
+
+
+def _overlap(shape, p, others):
+    """How deep [m] the samples of `shape` at pose p (x, y, yaw) lie inside each of `others`
+    (Shape, x, y, yaw), less OVERLAP_SLACK, per sample and other piece."""
+    world = _place(shape.samples, p)
+    out = []
+    for other, *q in others:
+        c, s = np.cos(q[2]), np.sin(q[2])
+        local = (world - q[:2]) @ np.array([[c, -s], [s, c]])
+        out.append(np.maximum(-other.outside(local) - OVERLAP_SLACK, 0.0))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _place(points, p):
+    c, s = np.cos(p[2]), np.sin(p[2])
+    return points @ np.array([[c, -s], [s, c]]).T + np.asarray(p[:2])
+
 
 class _Sparse:
     """Every k-th sample of a shape (for the coarse yaw sweep)."""
@@ -342,7 +396,7 @@ def perceive(observation, meshes, camera):
     view = _View(camera, depth)
     labels = _labels(rgb)
     kernel = np.ones((3, 3), np.uint8)
-    records = []
+    records, fits = [], {}
     for k, (oid, key) in enumerate(OBJECTS.items()):
         if key not in meshes:
             continue
@@ -363,10 +417,47 @@ def perceive(observation, meshes, camera):
         piece = _Piece(view, _Shape(_outline(meshes[key])), mask, mask)
         if piece.n_top < MIN_PIXELS:
             continue
-        x, y, yaw = piece.fit(2 * np.pi / SYMMETRY.get(key, 1))
+        period = 2 * np.pi / SYMMETRY.get(key, 1)
+        fits[oid] = (piece, key, period, piece.fit(period))
+    _apart(fits)
+    for oid, (_, key, _, (x, y, yaw)) in fits.items():
         c, s = np.cos(yaw), np.sin(yaw)
         pose = np.array(
             [[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
         )
         records.append({"id": oid, "mesh": key, "pose": pose})
     return records
+
+
+def _apart(fits):
+    """Pieces fitted one by one may overlap where one is mostly hidden (its outline then fits
+    several turns): fit again, kept out of the others, the piece of an overlapping pair the
+    image shows less of, and keep that fit when the pair no longer overlaps."""
+    for _ in range(len(fits)):
+        clash = _worst_clash(fits)
+        if clash is None:
+            return
+        a, b = clash
+        weak = a if fits[a][0].n_top <= fits[b][0].n_top else b
+        piece, key, period, _ = fits[weak]
+        others = [(f[0].shape, *f[3]) for o, f in fits.items() if o != weak]
+        new, _ = piece.refit_apart(period, others)
+        if np.max(_overlap(piece.shape, new, others), initial=0.0) > OVERLAP_TOL:
+            return  # no fit keeps it apart: leave the pieces as the image alone put them
+        fits[weak] = (piece, key, period, new)
+
+
+def _worst_clash(fits):
+    """The pair of fitted pieces that overlap deepest beyond OVERLAP_TOL, or None."""
+    worst, pair = OVERLAP_TOL, None
+    ids = list(fits)
+    for i, a in enumerate(ids):
+        for b in ids[i + 1 :]:
+            A, B = fits[a], fits[b]
+            depth = max(
+                np.max(_overlap(A[0].shape, A[3], [(B[0].shape, *B[3])]), initial=0.0),
+                np.max(_overlap(B[0].shape, B[3], [(A[0].shape, *A[3])]), initial=0.0),
+            )
+            if depth > worst:
+                worst, pair = depth, (a, b)
+    return pair
