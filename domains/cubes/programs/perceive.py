@@ -12,7 +12,10 @@
    only the yaw is estimated, and the height is snapped to the stacking levels when close.
    A barely seen cube is slid to where it explains its points without covering what the
    image shows behind it (a farther surface, or another cube's colour), at its own yaw or a
-   well-seen neighbour's (a sliver of a top face pins the yaw down little).
+   well-seen neighbour's (a sliver of a top face pins the yaw down little). How much of a
+   cube the image shows is counted in faces seen square-on at its distance, so that these
+   rules hold for any camera; a fit whose centre lies under the table is colour blends along
+   other cubes' edges, not a cube.
 4. Hidden cubes: a cube the camera does not show that holds up a cube it does goes under that
    cube (a tower's lower cubes, a pyramid's base); one that holds nothing up still is one of
    the six: it goes where the image allows it, on the table clear of the others and hidden
@@ -41,16 +44,22 @@ HUE_TOL = 20.0  # [deg]
 SAT_MIN = 0.35
 VAL_MIN = 0.10
 MIN_PIXELS = 10
-WEAK_PIXELS = 1500  # a cube seen by fewer pixels is placed by physics when needed
-# a cube seen by fewer pixels is placed using free space as well (a pyramid's supporters half
-# hidden behind a tower show ~1700–2200 pixels and slide along the faces they show; a cube
-# beside or behind a tower, one side and part of its top seen, 2600–4100 pixels, and slides
-# 12–21 mm), and a cube seen by at least FIRM_PIXELS (not cut by the border) holds its place
-# against the others' refinement (cubes near the middle of the front camera's view show up to
-# ~11000 pixels, half of them fewer than 5000). Both chosen on our own drawn scenes of a cube
-# behind a tower (`python -m benchmarks.occlusion_bench`, seeds 100–219)
-REFINE_PIXELS = 4500
-FIRM_PIXELS = 2500
+# How much of a cube the image shows is counted in faces: its pixels over the pixels of one
+# face seen square-on at the cube's distance, (f · side / distance)², so that the thresholds
+# hold for any camera (a 960×540 camera 0.9 m away shows a cube a fifth of the pixels the
+# front view, 1280×720 at 0.6 m, does). A cube seen by fewer than WEAK_FACES is placed by
+# physics when needed; by fewer than REFINE_FACES it is placed using free space as well (a
+# pyramid's supporters half hidden behind a tower show ~0.5–0.6 of a face and slide along the
+# faces they show; a cube beside or behind a tower, one side and part of its top seen,
+# 0.7–1.2, and slides 12–21 mm), and a cube seen by at least FIRM_FACES (not cut by the
+# border) holds its place against the others' refinement (cubes near the middle of the view
+# show up to ~3 faces, half of them fewer than 1.4). Chosen on our own drawn scenes of a cube
+# behind a tower (`python -m benchmarks.occlusion_bench`, seeds 100–219), as 1500, 4500 and
+# 2500 pixels of the front view (a face there: 3530 pixels)
+WEAK_FACES = 0.425
+REFINE_FACES = 1.275
+FIRM_FACES = 0.71
+BELOW_TABLE = 0.005  # a fit whose centre lies this far below a cube on the table is none [m]
 EXPLAINED = 0.003  # a point this close to another cube's surface belongs to that cube [m]
 MAX_POINTS = 500  # per cube, for speed
 # a cube nothing shows goes to a spot on the table hidden from the camera: candidate centres
@@ -333,7 +342,7 @@ def _repair(fits, placed, half, missing, clouds):
     seen cube that is the only support of the cube above it (a column) is centred under it
     when what shows of it agrees: a sliver of a face pins down little, the cube above it more.
     """
-    weak = {n for n, (_, _, pixels) in fits.items() if pixels < WEAK_PIXELS}
+    weak = {n for n, (_, _, faces) in fits.items() if faces < WEAK_FACES}
     weak |= set(placed) - set(fits)
     unseen = [n for n in missing if n not in placed]
     for _ in range(len(placed) + len(unseen)):
@@ -470,6 +479,7 @@ def perceive(observation, meshes, camera):
     key = "cube" if "cube" in meshes else sorted(meshes)[0]
     half = float(np.max(np.abs(np.asarray(meshes[key].vertices))))
     eye = np.asarray(camera["T_world_camera"], dtype=float)[:3, 3]
+    focal = float(np.asarray(camera["K"], dtype=float)[0, 0])
     labels = _labels(rgb)
     kernel = np.ones((3, 3), np.uint8)
     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
@@ -483,17 +493,22 @@ def perceive(observation, meshes, camera):
         pts = _points(mask, depth, camera)
         if len(pts) >= MIN_PIXELS:
             p, top = _fit(pts, half, eye)
-            fits[name] = (p, top, int(raw.sum()))
+            if p[2] < half - BELOW_TABLE:
+                # a cube under the table: its few pixels are colour blends along other cubes'
+                # edges with the depth of what lies behind, not a face; it counts as unseen
+                continue
+            face = (focal * 2 * half / np.linalg.norm(p[:3] - eye)) ** 2  # [px]
+            fits[name] = (p, top, float(raw.sum()) / face)
             # a cube cut by the image border is as uncertain as a barely seen one
             cut = raw[:2].any() or raw[-2:].any() or raw[:, :2].any() or raw[:, -2:].any()
             clouds[name] = (pts, k, cut)
-    for name, (p, top, pixels) in list(fits.items()):
+    for name, (p, top, shown) in list(fits.items()):
         pts, k, cut = clouds[name]
-        if pixels < REFINE_PIXELS or cut:
+        if shown < REFINE_FACES or cut:
             firm = [
                 q
-                for n, (q, _, px) in fits.items()
-                if n != name and px >= FIRM_PIXELS and not clouds[n][2]
+                for n, (q, _, faces) in fits.items()
+                if n != name and faces >= FIRM_FACES and not clouds[n][2]
             ]
             # points on another cube's surface are colour blends at its edges, not evidence
             keep = np.ones(len(pts), bool)
@@ -507,7 +522,7 @@ def perceive(observation, meshes, camera):
                 p, top = _fit(pts, half, eye)
             others = [q for n, (q, _, _) in fits.items() if n != name]
             p = _free_space(p, pts, half, depth, labels, k, camera, firm, others)
-            fits[name] = (p, top, pixels)
+            fits[name] = (p, top, shown)
     missing = [n for n in HUES if n not in fits]
     placed = _settle(fits, list(missing), half)
     placed = _repair(fits, placed, half, missing, clouds)
