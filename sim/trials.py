@@ -90,12 +90,16 @@ class TrialProtocol:
         track_objects: the executor reads every object's true pose before each pick (a
             ground-truth tracker: no real robot has it).
         weld_assist: the physics aid of `sim.weld`.
+        camera_offset: the executor estimates the perceiving camera's calibration offset from
+            the wrist camera and takes it off (`ExecutorConfig.camera_offset`; needs an
+            in-hand estimate).
     """
 
     realism: str = "default"
     in_hand: Literal["wrist", "exact", "none"] = "wrist"
     track_objects: bool = False
     weld_assist: bool = False
+    camera_offset: bool = True
 
     @property
     def label(self) -> str:
@@ -106,11 +110,18 @@ class TrialProtocol:
             parts.append("ground-truth object tracker")
         if self.weld_assist:
             parts.append("weld assist")
+        if not self.camera_offset and self.in_hand != "none":
+            parts.append("no camera-offset estimate")
         return ", ".join(parts)
 
     def executor_config(self, base: ExecutorConfig | None = None) -> ExecutorConfig:
         noise = {"wrist": WRIST_CAMERA, "exact": EXACT, "none": None}[self.in_hand]
-        return replace(base or ExecutorConfig(), in_hand=noise, track_objects=self.track_objects)
+        return replace(
+            base or ExecutorConfig(),
+            in_hand=noise,
+            track_objects=self.track_objects,
+            camera_offset=self.camera_offset,
+        )
 
 
 HONEST = TrialProtocol()

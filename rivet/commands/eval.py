@@ -292,6 +292,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="in-hand pose estimate after the grasp: a wrist camera (default), exact, none",
     )
     p.add_argument(
+        "--no-camera-offset",
+        action="store_true",
+        help="the executor takes perceived poses as they are, not corrected for the camera's "
+        "calibration offset it reads with the wrist camera (see docs/executor.md)",
+    )
+    p.add_argument(
         "--track-objects",
         action="store_true",
         help="give the executor every object's true pose before each pick (no real robot can)",

@@ -134,6 +134,16 @@ def test_the_protocol_options_name_what_the_robot_senses(
     assert ("now --protocol oracle-sensing" in capsys.readouterr().err) == warned
 
 
+def test_the_camera_offset_estimate_can_be_switched_off():
+    from rivet.cli import build_parser
+    from rivet.commands._trials import protocol_of
+
+    on = protocol_of(build_parser().parse_args(["eval", "cubes"]))
+    off = protocol_of(build_parser().parse_args(["eval", "cubes", "--no-camera-offset"]))
+    assert on.executor_config().camera_offset and not off.executor_config().camera_offset
+    assert "camera-offset" not in on.label and "no camera-offset estimate" in off.label
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
