@@ -384,7 +384,7 @@ class Executor:
         if sensor is None or not self.config.camera_offset or self.config.track_objects:
             return
         placed = self._placed.get(oid)
-        if placed is not None and np.array_equal(placed, self.belief[oid]):
+        if placed is not None and np.allclose(placed, self.belief[oid], atol=1e-6):
             return  # where the robot put it: nothing about the camera
         rel = sensor.estimate(oid)
         if rel is None:
