@@ -1,7 +1,7 @@
 """A numpy triangle rasteriser for depth and object masks (private to refine).
 
-`toolbox.render.render_scene` draws with OpenGL: exact, but a context costs ~0.5 s to open per
-image size and a call ~15 ms, too slow for the thousands of candidate poses a pose refiner
+`toolbox.render.render_scene` draws with OpenGL: exact, but its context costs ~0.5 s to open
+and a call ~15 ms, too slow for the thousands of candidate poses a pose refiner
 weighs. This draws the same thing on the CPU for small windows of a small image: a pixel is
 covered when its centre (integer (u, v), the OpenCV convention render_scene also follows) lies
 inside a triangle's projection, its depth is interpolated perspective-correctly (1/z is linear

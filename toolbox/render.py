@@ -3,8 +3,8 @@
 Design rule: one call renders exactly what the generated `render` function must return —
 `{"rgb", "depth", "mask"}` — from records, meshes and a camera dict (pixel centres at
 integer coordinates). Mask and depth come from one pass without anti-aliasing, so they agree
-pixel for pixel. The first call for an image size takes ~1 s (OpenGL context); later calls
-~0.05–0.15 s at 1280×720.
+pixel for pixel. The first call takes ~0.5–1 s (the OpenGL context, the meshes uploaded); later
+calls ~0.05–0.15 s at 1280×720, whatever their image size.
 """
 
 from __future__ import annotations
@@ -29,13 +29,13 @@ os.environ.setdefault("MESA_SHADER_CACHE_DISABLE", "true")
 
 __all__ = ["compare_renders", "overlay_mask", "render_scene"]
 
-# One pyrender context per image size, with the meshes uploaded to it (a pyrender mesh's GPU
+# One pyrender context for every image size (a size change only re-makes its framebuffer:
+# drawn cameras come in many sizes), with the meshes uploaded to it (a pyrender mesh's GPU
 # buffers belong to one context). Calls are serialised by a lock, and each gives the calling
 # thread's previous EGL context back (MuJoCo's, say) so that renderers can share a thread.
-_MAX_CONTEXTS = 4  # image sizes kept alive at once
-_MAX_MESHES = 256  # uploaded (mesh, colour) pairs kept per context
+_MAX_MESHES = 256  # uploaded (mesh, colour) pairs kept
 _LOCK = threading.Lock()
-_CONTEXTS: OrderedDict[tuple[int, int], _Context] = OrderedDict()
+_CONTEXTS: list[_Context] = []  # the one context, once made
 _OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
@@ -199,7 +199,7 @@ def _resolve(
 
 
 class _Context:
-    """An offscreen renderer of one size plus the meshes uploaded to its OpenGL context."""
+    """An offscreen renderer plus the meshes uploaded to its OpenGL context."""
 
     def __init__(self, width: int, height: int) -> None:
         import pyrender
@@ -302,18 +302,18 @@ def _delete_contexts() -> None:
     a display that other libraries (MuJoCo) may still be tearing down."""
     with _LOCK:
         while _CONTEXTS:
-            _, ctx = _CONTEXTS.popitem()
+            ctx = _CONTEXTS.pop()
             with contextlib.suppress(Exception):  # interpreter teardown: nothing left to tell
                 ctx.delete()
 
 
 def _context(width: int, height: int) -> _Context:
-    ctx = _CONTEXTS.get((width, height))
-    if ctx is None:
-        ctx = _CONTEXTS[(width, height)] = _Context(width, height)
-        while len(_CONTEXTS) > _MAX_CONTEXTS:
-            _CONTEXTS.popitem(last=False)[1].delete()
-    _CONTEXTS.move_to_end((width, height))
+    """The context, drawing at `width` × `height` from now on (with framebuffers, as EGL has,
+    pyrender re-makes only its framebuffer on a new size; without, the whole context)."""
+    if not _CONTEXTS:
+        _CONTEXTS.append(_Context(width, height))
+    ctx = _CONTEXTS[0]
+    ctx.renderer.viewport_width, ctx.renderer.viewport_height = width, height
     return ctx
 
 

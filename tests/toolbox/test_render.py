@@ -154,16 +154,29 @@ def test_rendering_1280x720_labels_every_object(cube):
     assert out["rgb"].shape == (720, 1280, 3) and np.array_equal(out["mask"], first["mask"])
 
 
-def test_evicting_a_context_keeps_the_others_working(cube):
+def test_every_image_size_draws_with_the_one_context_as_a_fresh_one_would(cube):
+    """Drawn cameras come in many sizes: one context re-sized for each, and each size's image
+    is what a context made at that size alone draws."""
     from toolbox import render
 
-    recs = [cube_record(pose_from_xyz_yaw(0, 0, HALF, 0))]
-    keep = top_down_camera(1.0, width=200, height=100, f=150.0)
-    ref = render_scene(recs, {"cube": cube}, keep)
-    for i in range(render._MAX_CONTEXTS + 1):  # more sizes than are cached
-        render_scene(
-            recs, {"cube": cube}, top_down_camera(1.0, width=64 + 8 * i, height=48, f=60.0)
-        )
-        render_scene(recs, {"cube": cube}, keep)  # stays most recently used
-    np.testing.assert_array_equal(render_scene(recs, {"cube": cube}, keep)["mask"], ref["mask"])
-    assert len(render._CONTEXTS) == render._MAX_CONTEXTS
+    recs = [cube_record(pose_from_xyz_yaw(0.01, -0.02, HALF, 0.3))]
+    sizes = [(200, 100), (64, 48), (321, 177), (200, 100), (96, 160)]
+    drawn = [
+        render_scene(recs, {"cube": cube}, top_down_camera(1.0, width=w, height=h, f=w * 0.75))
+        for w, h in sizes
+    ]
+    assert len(render._CONTEXTS) == 1
+    for (w, h), got in zip(sizes, drawn, strict=True):
+        assert got["mask"].shape == got["depth"].shape == (h, w) and got["rgb"].shape == (h, w, 3)
+        ctx = render._Context(w, h)  # a context made for this size alone
+        try:
+            render._CONTEXTS.insert(0, ctx)
+            alone = render_scene(
+                recs, {"cube": cube}, top_down_camera(1.0, width=w, height=h, f=w * 0.75)
+            )
+        finally:
+            render._CONTEXTS.remove(ctx)
+            ctx.delete()
+        np.testing.assert_array_equal(got["mask"], alone["mask"])
+        np.testing.assert_array_equal(got["depth"], alone["depth"])
+        np.testing.assert_array_equal(got["rgb"], alone["rgb"])
