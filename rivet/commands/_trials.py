@@ -91,7 +91,7 @@ def protocol_of(args: argparse.Namespace):
         in_hand=args.in_hand or base.in_hand,
         track_objects=args.track_objects or base.track_objects,
         weld_assist=args.weld_assist,
-        camera_offset=not getattr(args, "no_camera_offset", False),
+        camera_offset=not args.no_camera_offset,
     )
 
 
