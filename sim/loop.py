@@ -73,7 +73,10 @@ class RecoveryBudget:
         seconds: wall-clock time from `begin` (or `adopt`) to the last step handed out [s].
         same_failure: how many times in a row the same step (object and target) may fail
             for the same reason on a scene that looks unchanged: trying it again would only
-            repeat what was seen (a part wedged where no grasp fits).
+            repeat what was seen (a part wedged where no grasp fits). Where a look had moved
+            the object's belief, the loop first doubts that look (the object is believed where
+            it was before, as after a grasp on air) and plans again; it gives up only when
+            there is no look left to doubt.
     """
 
     replans: int = 5
@@ -210,12 +213,19 @@ class ClosedLoop:
         if ok and not off:
             self._repeated = None
             return self._next()
+        doubted = ""
         if not ok and not off and not recalled:
             times = self._same_failure(step, failure or "")
             if times >= self.budget.same_failure:
-                return self._stop(f"step {self.reported} ({step['object']}) failed {times} times "
-                                  f"in a row the same way on a scene that did not change: "
-                                  f"{clip(failure or 'no reason', 160)}")  # fmt: skip
+                if not self._recall(oid):
+                    return self._stop(f"step {self.reported} ({oid}) failed {times} times in a "
+                                      f"row the same way on a scene that did not change: "
+                                      f"{clip(failure or 'no reason', 160)}")  # fmt: skip
+                # the object is believed where a look put it, and every step there fails the
+                # same way: doubt the look before giving up (believed where it was before)
+                self._repeated = None
+                doubted = (f" ({oid} failed {times} times in a row where a look had put it: "
+                           "believed where it was before)")  # fmt: skip
         else:
             self._repeated = None
         if self.replans >= self.budget.replans:
@@ -226,7 +236,7 @@ class ClosedLoop:
         self.replans += 1
         assert self.goal is not None
         state = self._state(self._records())
-        return self._follow(self.programs.plan(state, self.goal), f"replan {self.replans}")
+        return self._follow(self.programs.plan(state, self.goal), f"replan {self.replans}{doubted}")
 
     # -- inside -------------------------------------------------------------------------------
 
