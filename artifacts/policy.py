@@ -80,10 +80,9 @@ class ProgramPolicy:
     def look_prefers_belief(
         self, domain: Any, observation: dict, seen: list[dict], alternative: list[dict]
     ) -> list[str]:
-        """The ids of the objects `alternative` (`seen` with some objects at other poses: the
-        believed ones, or the other way round) explains `observation` better than `seen` does
-        (`artifacts.fit.better_explained`, the closed loop's referee); none when the fit
-        cannot be judged."""
+        """The ids of the objects `alternative` (`seen` with some objects at their believed
+        poses) explains `observation` better than `seen` does (`artifacts.fit.better_explained`,
+        the closed loop's referee); none when the fit cannot be judged."""
         from artifacts.fit import better_explained
 
         try:

@@ -32,10 +32,8 @@ up saying so, instead of ending "done" off the goal.
 A loop with a `referee` asks it, before a look moves a belief, whether the image fits the
 object better where it was believed: two photos from one camera can share a misreading (a cube
 half hidden in a tower, read through a low camera, lands at the same wrong place on both), and
-then only the image itself can tell a misread from a move. An object the hand placed keeps its
-placement unless the referee, asked the other way round, finds the image fits it better where
-the look puts it. `ProgramPolicy.look_prefers_belief` renders both explanations with the set's
-own `render` (`artifacts.fit.better_explained`).
+then only the image itself can tell a misread from a move. `ProgramPolicy.look_prefers_belief`
+renders both explanations with the set's own `render` (`artifacts.fit.better_explained`).
 """
 
 from __future__ import annotations
@@ -111,9 +109,7 @@ class ClosedLoop:
             the last look before the loop says done.
         referee: optional, `referee(observation, seen, alternative)` → the ids of the objects
             that `alternative` (`seen` with the objects it would move put back where they are
-            believed) explains better than `seen` does; those keep their belief, and so do the
-            objects the hand placed that `referee(observation, alternative, seen)` does not
-            name.
+            believed) explains better than `seen` does; those keep their belief.
     """
 
     domain: Domain
@@ -141,8 +137,6 @@ class ClosedLoop:
         self._looked: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._refuted: dict[str, list[np.ndarray]] = {}  # seen poses a grasp found empty
         self._last_look: tuple[Mapping[str, Any], list[dict]] | None = None  # for the judge
-        # objects believed where a transfer reported done put them (unless in `_looked`)
-        self._placed: set[str] = set()
 
     # -- starting -------------------------------------------------------------------------
 
@@ -190,12 +184,9 @@ class ClosedLoop:
             target = np.asarray(step["target_pose"], float)
             self.belief[oid] = target
             self._looked.pop(oid, None)  # placed: the hand knows where it is
-            self._placed.add(oid)
             self._refuted[oid] = [
                 T for T in self._refuted.get(oid, []) if not self._near(T, target)
             ]
-        else:
-            self._placed.discard(oid)  # the hand had it, or tried: not where it was placed
         recalled = not ok and missed and self._recall(oid)  # before the new look is judged
         seen = self.programs.perceive(observation)
         self.observations += 1
@@ -205,7 +196,7 @@ class ClosedLoop:
             again = self.programs.perceive(look_again())
             self.observations += 1
             seen, unconfirmed = self._confirmed(seen, again)
-        seen, refereed = self._refereed(observation, seen)  # why each kept its belief
+        seen, refereed = self._refereed(observation, seen)
         off = self._differences(seen)
         self.events.append(LoopEvent(
             kind="observed", step=self.reported,
@@ -216,7 +207,8 @@ class ClosedLoop:
                                 "was before"] if recalled else []) +
                               ([f"a second look did not confirm {', '.join(unconfirmed[:4])}: "
                                 "believed where it was"] if unconfirmed else []) +
-                              refereed[:4])),
+                              ([f"the image fits {', '.join(refereed[:4])} better where believed:"
+                                " believed there"] if refereed else []))),
         ))  # fmt: skip
         if ok and not off:
             self._repeated = None
@@ -349,16 +341,9 @@ class ClosedLoop:
         return kept, unconfirmed
 
     def _refereed(self, observation: Mapping[str, Any], seen: Any) -> tuple[Any, list[str]]:
-        """`seen` without the records of objects that keep their belief on the image's
-        evidence, and why each kept it (nothing changes without a referee, or when the look
-        moves nothing believed):
-
-        - the referee finds the image better explained with the object where believed;
-        - the hand placed the object where it is believed (a transfer reported done, no look
-          has moved it since) and the referee does not find the image better explained where
-          the look puts it. A placement is known to a millimetre; a look that the image cannot
-          tell from it is a reading, not a move (a part half hidden under a beam reads 11 mm
-          off on some photos and right on others)."""
+        """`seen` without the records the referee finds better explained at their believed
+        poses, and those records' ids (nothing changes without a referee, or when the look
+        moves nothing believed)."""
         if self.referee is None or not isinstance(seen, list):
             return seen, []
         moved: dict[str, np.ndarray] = {}
@@ -376,18 +361,7 @@ class ClosedLoop:
             {**r, "pose": moved[oid(r)].tolist()} if oid(r) in moved else r for r in seen
         ]
         better = {str(i) for i in self.referee(observation, seen, alternative)} & moved.keys()
-        placed = {i for i in moved if i in self._placed and i not in self._looked} - better
-        if placed:  # the same question the other way round: does the image favour the look?
-            placed -= {str(i) for i in self.referee(observation, alternative, seen)}
-        why = []
-        if better:
-            why.append(f"the image fits {', '.join(sorted(better))} better where believed: "
-                       "believed there")  # fmt: skip
-        if placed:
-            why.append(f"the image does not fit {', '.join(sorted(placed))} better where seen "
-                       "than where placed: believed there")  # fmt: skip
-        kept = better | placed
-        return [r for r in seen if oid(r) not in kept], why
+        return [r for r in seen if oid(r) not in better], sorted(better)
 
     def _agree(self, oid: str, T: np.ndarray, T2: np.ndarray, mesh: str) -> bool:
         """Whether two looks agree on an object: within the scoring tolerance of each other,

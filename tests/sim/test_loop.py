@@ -265,24 +265,19 @@ def test_two_looks_that_both_show_a_part_far_from_its_belief_are_believed(cubes)
         assert step["object"] == "a" if replanned else step["object"] == "b"
 
 
-def _poses(records) -> dict:
-    return {r["id"]: np.asarray(r["pose"]).tolist() for r in records}
-
-
 def test_a_look_the_referee_finds_better_explained_where_believed_keeps_the_belief(cubes):
     """Two looks agree on a part 45 mm off its belief (a misreading both photos share): with a
-    referee whose image shows the part where believed, the belief stays and nothing is
-    replanned; the referee is shown the look and the look with that part put back. With a
-    referee whose image shows it where the look puts it, the part is believed moved and
-    replanned."""
+    referee that finds the image fits it better where believed, the belief stays and nothing
+    is replanned; the referee is shown the look and the look with that part put back. With a
+    referee that prefers the look, the part is believed moved and replanned."""
     a0, b0, a1, b1 = _at(0.5, 0.0), _at(0.5, 0.1), _at(0.4, 0.0), _at(0.4, 0.1)
     misread = _at(0.445, 0.0)
-    for shown, replanned in ((a1, False), (misread, True)):
+    for verdict, replanned in ((["a"], False), ([], True)):
         asked = []
 
-        def referee(observation, seen, alternative, shown=shown, asked=asked):
+        def referee(observation, seen, alternative, verdict=verdict, asked=asked):
             asked.append((observation, seen, alternative))
-            return [r["id"] for r in alternative if np.allclose(r["pose"], shown)]
+            return verdict
 
         loop = ClosedLoop(cubes, Scripted(), referee=referee)
         loop.begin(_obs(a=a0, b=b0), _obs(a=a1, b=b1))
@@ -290,48 +285,20 @@ def test_a_look_the_referee_finds_better_explained_where_believed_keeps_the_beli
         step = loop.report(ok=True, observation=look, look_again=lambda: _obs(a=misread, b=b0))
         assert (loop.replans == 1) is replanned, loop.events[-1].detail
         observation, seen, alternative = asked[0]
-        assert observation is look
-        assert _poses(seen) == {"a": misread.tolist(), "b": b0.tolist()}
-        assert _poses(alternative) == {"a": a1.tolist(), "b": b0.tolist()}
-        if replanned:  # a was placed: asked the other way round too, and the look won
-            assert len(asked) == 2 and asked[1][1:] == (alternative, seen)
+        assert observation is look and len(asked) == 1
+        assert {r["id"]: np.asarray(r["pose"]).tolist() for r in seen} == {
+            "a": misread.tolist(), "b": b0.tolist()
+        }  # fmt: skip
+        assert {r["id"]: np.asarray(r["pose"]).tolist() for r in alternative} == {
+            "a": a1.tolist(), "b": b0.tolist()
+        }  # fmt: skip
+        if replanned:
             assert step["object"] == "a" and np.allclose(loop.belief["a"], misread)
         else:
-            assert len(asked) == 1
             assert step["object"] == "b" and np.allclose(loop.belief["a"], a1)
             assert "the image fits a better where believed: believed there" in (
                 loop.events[-1].detail
             )
-
-
-def test_a_placed_part_keeps_its_belief_unless_the_image_favours_the_look(cubes):
-    """A referee that cannot tell the two apart (a part half hidden reads 11 mm off on some
-    photos): a part the hand placed keeps its placement, a part only ever perceived (the
-    start) takes the look, and a placed part the image shows moved is believed moved."""
-
-    def undecided(observation, seen, alternative):
-        return []
-
-    a0, b0, a1, b1 = _at(0.5, 0.0), _at(0.5, 0.1), _at(0.4, 0.0), _at(0.4, 0.1)
-    loop = ClosedLoop(cubes, Scripted(), referee=undecided)
-    loop.begin(_obs(a=a0, b=b0), _obs(a=a1, b=b1))
-    a_read, b_read = _at(0.4, 0.011), _at(0.5, 0.12)  # a was placed, b not yet moved
-    step = loop.report(ok=True, observation=_obs(a=a_read, b=b_read))
-    assert np.allclose(loop.belief["a"], a1) and np.allclose(loop.belief["b"], b_read)
-    assert step["object"] == "b" and loop.replans == 1  # for b
-    assert loop.events[-2].detail == (
-        "b is 20 mm from where it was believed; the image does not fit a better where seen "
-        "than where placed: believed there"
-    )
-
-    def shows_the_look(observation, seen, alternative):
-        return [r["id"] for r in alternative if np.allclose(r["pose"], pushed)]
-
-    pushed = _at(0.43, 0.0)
-    loop = ClosedLoop(cubes, Scripted(), referee=shows_the_look)
-    loop.begin(_obs(a=a0, b=b0), _obs(a=a1, b=b1))
-    step = loop.report(ok=True, observation=_obs(a=pushed, b=b0))
-    assert step["object"] == "a" and np.allclose(loop.belief["a"], pushed)
 
 
 def test_a_look_that_moves_nothing_is_not_refereed(cubes):
