@@ -198,6 +198,13 @@ class ClosedLoop:
             seen, unconfirmed = self._confirmed(seen, again)
         seen, refereed = self._refereed(observation, seen)
         off = self._differences(seen)
+        times = 0  # how many times in a row this step failed this way on an unchanged scene
+        if not ok and not off and not recalled:
+            times = self._same_failure(step, failure or "")
+        # every step where a look put the object fails the same way: doubt that look first
+        doubted = times >= self.budget.same_failure and self._recall(oid)
+        if doubted:
+            self._repeated = None
         self.events.append(LoopEvent(
             kind="observed", step=self.reported,
             detail=("as expected" if not off and ok and not unconfirmed and not refereed else
@@ -205,6 +212,8 @@ class ClosedLoop:
                                if not ok else []) + off[:4] +
                               ([f"{oid} was not where a look had put it: believed where it "
                                 "was before"] if recalled else []) +
+                              ([f"{oid} failed {times} times in a row where a look had put it:"
+                                " believed where it was before"] if doubted else []) +
                               ([f"a second look did not confirm {', '.join(unconfirmed[:4])}: "
                                 "believed where it was"] if unconfirmed else []) +
                               ([f"the image fits {', '.join(refereed[:4])} better where believed:"
@@ -213,20 +222,11 @@ class ClosedLoop:
         if ok and not off:
             self._repeated = None
             return self._next()
-        doubted = ""
-        if not ok and not off and not recalled:
-            times = self._same_failure(step, failure or "")
-            if times >= self.budget.same_failure:
-                if not self._recall(oid):
-                    return self._stop(f"step {self.reported} ({oid}) failed {times} times in a "
-                                      f"row the same way on a scene that did not change: "
-                                      f"{clip(failure or 'no reason', 160)}")  # fmt: skip
-                # the object is believed where a look put it, and every step there fails the
-                # same way: doubt the look before giving up (believed where it was before)
-                self._repeated = None
-                doubted = (f" ({oid} failed {times} times in a row where a look had put it: "
-                           "believed where it was before)")  # fmt: skip
-        else:
+        if times >= self.budget.same_failure and not doubted:
+            return self._stop(f"step {self.reported} ({oid}) failed {times} times in a row "
+                              f"the same way on a scene that did not change: "
+                              f"{clip(failure or 'no reason', 160)}")  # fmt: skip
+        if ok or off or recalled:
             self._repeated = None
         if self.replans >= self.budget.replans:
             return self._stop(f"the recovery budget of {self.budget.replans} replans is spent "
@@ -236,7 +236,7 @@ class ClosedLoop:
         self.replans += 1
         assert self.goal is not None
         state = self._state(self._records())
-        return self._follow(self.programs.plan(state, self.goal), f"replan {self.replans}{doubted}")
+        return self._follow(self.programs.plan(state, self.goal), f"replan {self.replans}")
 
     # -- inside -------------------------------------------------------------------------------
 

@@ -205,10 +205,11 @@ def test_a_step_that_keeps_failing_where_a_look_put_its_part_doubts_the_look(cub
     step = loop.report(ok=False, observation=_obs(a=misread, b=b0), failure=wedged)
     assert step["object"] == "b" and loop.replans == 3 and loop.status == "running"
     assert np.allclose(loop.belief["a"], a1)  # where its placement put it
-    assert loop.events[-1].detail == (
-        "replan 3 (a failed 2 times in a row where a look had put it: believed where it was "
-        "before): 1 steps"
+    assert loop.events[-2].detail == (
+        f"the step failed: {wedged}; a failed 2 times in a row where a look had put it: "
+        "believed where it was before"
     )
+    assert loop.events[-1].detail == "replan 3: 1 steps"
     assert loop.report(ok=True, observation=_obs(a=misread, b=b1)) is None  # not believed again
     assert loop.status == "done"
 
